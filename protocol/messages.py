@@ -1,0 +1,163 @@
+"""Telemetry and steer messages, parsed and encoded exactly as the Unity simulator does.
+
+The simulator sends every value as a STRING formatted with the machine's locale (``"0,0000"``
+happens) and expects strings back with a ``.`` decimal point: a JSON number in a ``steer`` reply
+makes it throw silently and stall.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from protocol.errors import ProtocolError
+
+FRAME_WIDTH = 320
+FRAME_HEIGHT = 160
+MAX_STEERING_DEG = 25.0
+_JPEG_MAGIC = b"\xff\xd8"
+
+
+@dataclass(frozen=True, slots=True)
+class Telemetry:
+    """One telemetry frame. ``image`` stays base64 text until someone needs the pixels."""
+
+    steering_angle_deg: float  # actual wheel angle, degrees (+-25)
+    throttle: float  # 0..1
+    speed: float  # mph (stock simulator) or km/h (paper's simulator): see SpeedUnit
+    image_b64: str
+
+
+@dataclass(frozen=True, slots=True)
+class SteerCommand:
+    """What the drive server sends back: steering normalised to -1..1, throttle -1..1 (<0 brakes)."""
+
+    steering: float
+    throttle: float
+
+
+def parse_number(value: Any, field: str) -> float:
+    """Parse a telemetry number: a string (``"0.25"``, locale ``"0,25"``, ``"7.8E-05"``) or a number."""
+    if isinstance(value, bool):
+        raise ProtocolError(f"{field}: expected a number, got a boolean")
+    if isinstance(value, int | float):
+        number = float(value)
+    elif isinstance(value, str):
+        text = value.strip()
+        if "," in text:
+            if "." in text:
+                raise ProtocolError(f"{field}: ambiguous number {value!r} (both ',' and '.')")
+            text = text.replace(",", ".")
+        try:
+            number = float(text)
+        except ValueError:
+            raise ProtocolError(f"{field}: not a number: {value[:40]!r}") from None
+    else:
+        raise ProtocolError(f"{field}: expected a number or a string, got {type(value).__name__}")
+    if not math.isfinite(number):
+        raise ProtocolError(f"{field}: not finite: {value!r}")
+    return number
+
+
+def parse_telemetry(payload: Any) -> Telemetry | None:
+    """Parse the payload of a ``telemetry`` event; ``None`` means manual mode (a key is held)."""
+    if payload is None:
+        return None
+    if not isinstance(payload, dict):
+        raise ProtocolError(f"telemetry: expected a JSON object, got {type(payload).__name__}")
+    missing = [k for k in ("steering_angle", "throttle", "speed", "image") if k not in payload]
+    if missing:
+        raise ProtocolError(f"telemetry: missing field(s) {', '.join(missing)}")
+    image = payload["image"]
+    if not isinstance(image, str) or not image:
+        raise ProtocolError("image: expected a non-empty base64 string")
+    return Telemetry(
+        steering_angle_deg=parse_number(payload["steering_angle"], "steering_angle"),
+        throttle=parse_number(payload["throttle"], "throttle"),
+        speed=parse_number(payload["speed"], "speed"),
+        image_b64=image,
+    )
+
+
+def _fmt(x: float, digits: int) -> str:
+    # repr-free fixed point with '.', never locale dependent, never '-0.0000'
+    text = f"{x:.{digits}f}"
+    return "0." + "0" * digits if float(text) == 0 else text
+
+
+def encode_steer(command: SteerCommand) -> dict[str, str]:
+    """The ``steer`` payload: both values as strings with a '.' decimal point, clamped to -1..1."""
+    for name, v in (("steering", command.steering), ("throttle", command.throttle)):
+        if not math.isfinite(v):
+            raise ProtocolError(f"{name}: refusing to send a non-finite value {v!r}")
+    steering = min(1.0, max(-1.0, command.steering))
+    throttle = min(1.0, max(-1.0, command.throttle))
+    return {"steering_angle": _fmt(steering, 6), "throttle": _fmt(throttle, 6)}
+
+
+def parse_steer(payload: Any) -> SteerCommand:
+    """Parse a ``steer`` payload (what a simulator client receives)."""
+    if not isinstance(payload, dict):
+        raise ProtocolError(f"steer: expected a JSON object, got {type(payload).__name__}")
+    for key in ("steering_angle", "throttle"):
+        if key not in payload:
+            raise ProtocolError(f"steer: missing field {key}")
+        if not isinstance(payload[key], str):
+            raise ProtocolError(f"steer: {key} must be a JSON string (the simulator stalls on numbers)")
+    return SteerCommand(
+        steering=parse_number(payload["steering_angle"], "steering_angle"),
+        throttle=parse_number(payload["throttle"], "throttle"),
+    )
+
+
+def encode_telemetry(
+    steering_angle_deg: float, throttle: float, speed: float, image_b64: str, decimal: str = "."
+) -> dict[str, str]:
+    """A telemetry payload as Unity writes it (``decimal=','`` imitates a European locale)."""
+
+    def f(x: float) -> str:
+        return f"{x:.4f}".replace(".", decimal)
+
+    return {"steering_angle": f(steering_angle_deg), "throttle": f(throttle), "speed": f(speed),
+            "image": image_b64}
+
+
+def decode_image(image_b64: str, reduce: int = 1) -> np.ndarray:
+    """Decode a base64 JPEG to an RGB ``uint8`` array (H, W, 3).
+
+    ``reduce`` in (1, 2, 4, 8) asks libjpeg to decode at 1/reduce size directly, which is
+    cheaper than decoding full size and resizing.
+    """
+    try:
+        raw = base64.b64decode(image_b64, validate=False)
+    except (binascii.Error, ValueError) as exc:
+        raise ProtocolError(f"image: invalid base64 ({exc})") from None
+    if not raw.startswith(_JPEG_MAGIC) and not raw.startswith(b"\x89PNG"):
+        raise ProtocolError(f"image: not a JPEG (starts with {raw[:4]!r}, {len(raw)} bytes)")
+    flags = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
+             8: cv2.IMREAD_REDUCED_COLOR_8}
+    if reduce not in flags:
+        raise ValueError(f"reduce must be 1, 2, 4 or 8, not {reduce}")
+    bgr = cv2.imdecode(np.frombuffer(raw, np.uint8), flags[reduce])
+    if bgr is None:
+        raise ProtocolError(f"image: corrupt JPEG ({len(raw)} bytes)")
+    expected = (FRAME_HEIGHT // reduce, FRAME_WIDTH // reduce)
+    if bgr.shape[:2] != expected:
+        raise ProtocolError(
+            f"image: expected {FRAME_WIDTH}x{FRAME_HEIGHT}, got {bgr.shape[1] * reduce}x{bgr.shape[0] * reduce}"
+        )
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def encode_image(rgb: np.ndarray, quality: int = 75) -> str:
+    """Encode an RGB frame as base64 JPEG (quality 75, like Unity's ``EncodeToJPG``)."""
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise ProtocolError("image: JPEG encoding failed")
+    return base64.b64encode(buf.tobytes()).decode("ascii")

@@ -1,0 +1,22 @@
+"""Speed units: the stock Udacity simulator reports mph, the paper's modified one km/h."""
+
+from __future__ import annotations
+
+from enum import Enum
+
+KMH_PER_MPH = 1.609344
+
+
+class SpeedUnit(str, Enum):
+    MPH = "mph"
+    KMH = "kmh"
+
+
+def to_kmh(speed: float, unit: SpeedUnit | str) -> float:
+    """Convert a telemetry speed in ``unit`` to km/h."""
+    return speed * KMH_PER_MPH if SpeedUnit(unit) is SpeedUnit.MPH else speed
+
+
+def from_kmh(speed_kmh: float, unit: SpeedUnit | str) -> float:
+    """Convert a speed in km/h to ``unit`` (what a simulator puts on the wire)."""
+    return speed_kmh / KMH_PER_MPH if SpeedUnit(unit) is SpeedUnit.MPH else speed_kmh
