@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from enum import Enum
+from enum import StrEnum
 
 KMH_PER_MPH = 1.609344
 
 
-class SpeedUnit(str, Enum):
+class SpeedUnit(StrEnum):
     MPH = "mph"
     KMH = "kmh"
 
