@@ -1,0 +1,113 @@
+"""``rbc eval``: the paper's robustness experiments for one model (Table 9 layout)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS
+from tools.evaluate.report import format_cell, plot_experiments, table9, write_json, write_text
+from tools.evaluate.runner import DriverSpec, Runner, spec_dict
+from tools.evaluate.suite import SuiteConfig, run_suite
+from tools.provenance import code_version, file_sha256
+
+log = logging.getLogger("rbc.eval")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", type=Path, help="ONNX model (default: the bundled model of --behavior)")
+    p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
+                   help="decides the track (lake / mountain / lake with 20 cones) and the experiments")
+    p.add_argument("--server", help="drive through a running drive_server at this URL instead of in-process "
+                                    "(the speed-limit experiment is then skipped: the limit is the server's)")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel simulator processes")
+    p.add_argument("--seeds", type=int, default=3, help="seeds per eta experiment (mean ± std)")
+    p.add_argument("--seed", type=int, default=0, help="first seed")
+    p.add_argument("--laps", type=int, default=1, help="laps per run")
+    p.add_argument("--experiments", nargs="+", choices=[e.key for e in EXPERIMENTS],
+                   default=[e.key for e in EXPERIMENTS], help="subset of the experiments")
+    p.add_argument("--track", help="override the behavior's track (name or JSON file)")
+    p.add_argument("--speed-limit", type=float, default=25.0, help="km/h for every experiment but the speed one")
+    p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
+
+
+def _model_path(args: argparse.Namespace) -> Path:
+    if args.model:
+        return args.model
+    from drive_server.models_dir import bundled_model_path
+
+    return bundled_model_path(args.behavior)
+
+
+def run(args: argparse.Namespace) -> int:
+    model = _model_path(args)
+    if not model.is_file():
+        raise SystemExit(f"rbc eval: model file not found: {model}")
+    experiments = tuple(args.experiments)
+    if args.server and "speed_limit" in experiments:
+        log.warning("--server: skipping the speed-limit experiment (the speed limit belongs to the server)")
+        experiments = tuple(e for e in experiments if e != "speed_limit")
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    journal = out / "runs.jsonl"
+    journal.unlink(missing_ok=True)
+    spec = DriverSpec(model=None if args.server else str(model), server=args.server)
+    cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
+                      speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
+                      map_dir=str(out / "failures"))
+    meta = {"model": str(model), "model_sha256": file_sha256(model), "code_version": code_version(),
+            "behavior": args.behavior, "seeds": args.seeds, "base_seed": args.seed, "laps": args.laps,
+            "workers": args.workers, "driver": spec_dict(spec), "autonomy_rule": AUTONOMY_RULE,
+            "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}
+
+    progress = _progress()
+    runner = Runner(spec, args.workers, journal, on_result=progress)
+    started = time.perf_counter()
+    summary, interrupted = {}, False
+    try:
+        summary = run_suite(cfg, runner, args.workers)
+    except KeyboardInterrupt:
+        interrupted = True
+        log.warning("interrupted: keeping the %d finished runs", len(runner.records))
+    finally:
+        runner.close(cancel=interrupted)
+    wall = time.perf_counter() - started
+    meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records))
+    write_json(out / "results.json", {"meta": meta, "summary": summary, "runs": runner.records})
+    if interrupted:
+        print(f"interrupted after {wall:.0f} s; {len(runner.records)} finished runs in {out / 'results.json'}")
+        return 130
+    write_text(out / "table9.md", table9({args.behavior: summary}))
+    plots = plot_experiments(summary, runner.records, out)
+    print(f"\nRobustness of {model.name} ({args.behavior}), {len(runner.records)} runs, "
+          f"{args.workers} workers, wall {wall:.0f} s")
+    width = max(len(e.title) for e in EXPERIMENTS)
+    for exp in EXPERIMENTS:
+        if exp.key in summary:
+            print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
+    print(f"\nwrote {out / 'results.json'}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
+    return 0
+
+
+def _progress():
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(desc="runs", unit="run")
+    except ModuleNotFoundError:
+        bar = None
+
+    def on_result(record: dict) -> None:
+        msg = f"{record['experiment']}={record['value']} seed {record['seed']}: " \
+              f"{'ok' if record['autonomous'] else 'intervention'}"
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix_str(msg)
+        else:
+            log.info(msg)
+
+    return on_result

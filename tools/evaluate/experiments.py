@@ -1,0 +1,106 @@
+"""The robustness experiments and their scoring rules, as data (like CARLA's statistics manager).
+
+Changing what "~100 %" means, a step size or a cap is an edit of this table, not of the runner.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+#: The paper reports ranges "for which the ego vehicle exhibited ~100% autonomy". We define it once:
+AUTONOMY_RULE = "no intervention in any lap of the run (eta = 100 %)"
+BEHAVIORS = ("simplistic", "rigorous", "collision")
+
+
+def is_autonomous(run: dict[str, Any]) -> bool:
+    """The single definition of "~100 %": no intervention in any lap, and every lap completed."""
+    laps = run["laps"]
+    return bool(laps) and all(lap["completed"] and not lap["interventions"] for lap in laps)
+
+
+@dataclass(frozen=True)
+class BehaviorSetup:
+    """Where a behavior was trained: its track and, for collision avoidance, the training cones."""
+
+    track: str
+    cones: int = 0
+    cone_seed: int = 0
+
+
+#: Training scenes of the bundled models (rbc collect uses the same cone seed for collision data).
+TRAINING_CONE_SEED = 1
+SETUPS: dict[str, BehaviorSetup] = {
+    "simplistic": BehaviorSetup("lake"),
+    "rigorous": BehaviorSetup("mountain"),
+    "collision": BehaviorSetup("lake", cones=20, cone_seed=TRAINING_CONE_SEED),
+}
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One row of Table 9.
+
+    measure:
+      ``eta``   -- degree of autonomy (mean +- std over seeds) for each value in ``values``;
+      ``range`` -- step outward from ``origin`` by ``step`` until the first non-autonomous run,
+                   within ``[lower_cap, upper_cap]``; reported relative to ``origin``;
+      ``max``   -- like ``range`` but upward only, reported as an absolute value.
+    """
+
+    key: str
+    title: str
+    measure: Literal["eta", "range", "max"]
+    parameter: str | None = None  # the ScenarioConfig field that is varied
+    values: tuple[Any, ...] = (None,)
+    origin: float = 0.0
+    step: float = 0.0
+    lower_cap: float = 0.0
+    upper_cap: float = 0.0
+    unit: str = ""
+    behaviors: tuple[str, ...] = BEHAVIORS
+    realtime: bool = False
+    fixed: dict[str, Any] = field(default_factory=dict)  # other ScenarioConfig overrides
+
+    def applies_to(self, behavior: str) -> bool:
+        return behavior in self.behaviors
+
+
+#: Cone layouts for the obstacle variation: new positions, unlike the training layout.
+TEST_CONE_SEED = 1001
+
+EXPERIMENTS: tuple[Experiment, ...] = (
+    Experiment("no_variation", "No variation", "eta"),
+    Experiment("obstacles", "Scene obstacle variation", "eta", "cones", values=(20, 10, 0),
+               behaviors=("collision",), fixed={"cone_seed": TEST_CONE_SEED}),
+    Experiment("light_intensity", "Scene light intensity variation", "range", "light_intensity",
+               origin=1.0, step=0.1, lower_cap=0.1, upper_cap=3.0, unit="cd"),
+    Experiment("light_direction", "Scene light direction variation", "range", "light_direction_deg",
+               origin=0.0, step=1.0, lower_cap=-45.0, upper_cap=45.0, unit="°"),
+    Experiment("position", "Vehicle position variation", "eta", "spawn_fraction", values=(0.5,)),
+    Experiment("orientation", "Vehicle orientation variation", "range", "yaw_offset_deg",
+               origin=0.0, step=5.0, lower_cap=-90.0, upper_cap=90.0, unit="°"),
+    Experiment("heading_inversion", "Vehicle heading inversion", "eta", "reverse", values=(True,)),
+    Experiment("speed_limit", "Vehicle speed limit variation", "max", "speed_limit_kmh",
+               origin=30.0, step=5.0, lower_cap=30.0, upper_cap=120.0, unit="km/h", realtime=True),
+)
+
+
+def experiment(key: str) -> Experiment:
+    for exp in EXPERIMENTS:
+        if exp.key == key:
+            return exp
+    raise KeyError(f"unknown experiment {key!r}; known: {', '.join(e.key for e in EXPERIMENTS)}")
+
+
+#: Table 9 of the paper, for side-by-side display (values as printed there).
+PAPER_TABLE9: dict[str, dict[str, str]] = {
+    "no_variation": {"simplistic": "≈100 %", "rigorous": "≈100 %", "collision": "≈100 %"},
+    "obstacles": {"simplistic": "…", "rigorous": "…", "collision": "η{20,10,0} ≈ 100 %"},
+    "light_intensity": {"simplistic": "[-0.4, +0.1] cd", "rigorous": "[-0.2, +0.9] cd", "collision": "[-0.6, +1.0] cd"},
+    "light_direction": {"simplistic": "[-14°, +1°]", "rigorous": "[-2°, +4°]", "collision": "[-18°, +28°]"},
+    "position": {"simplistic": "≈100 %", "rigorous": "≈100 %", "collision": "≈100 %"},
+    "orientation": {"simplistic": "[-35°, +15°]", "rigorous": "[-25°, +25°]", "collision": "[-55°, +40°]"},
+    "heading_inversion": {"simplistic": "≈96.91 %", "rigorous": "≈72.89 %", "collision": "≈91.09 %"},
+    "speed_limit": {"simplistic": "40 km/h", "rigorous": "35 km/h", "collision": "50 km/h"},
+}

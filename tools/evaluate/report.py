@@ -1,0 +1,127 @@
+"""Turn evaluation summaries into the paper's tables (Markdown) and plots."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, PAPER_TABLE9
+
+log = logging.getLogger(__name__)
+
+
+def write_json(path: Path, data: Any) -> None:
+    """Atomic JSON write (temp file, then rename), so an interrupted run never leaves half a file."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=str), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def write_text(path: Path, text: str) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _signed(x: float, unit: str) -> str:
+    text = f"{x:+.1f}" if unit == "cd" else f"{x:+.0f}"
+    return text + ("°" if unit == "°" else "")
+
+
+def format_cell(entry: dict[str, Any] | None) -> str:
+    """One measured Table 9 cell in the paper's notation."""
+    if entry is None:
+        return "n/a"
+    if entry["measure"] == "eta":
+        parts = []
+        for stats in entry["values"].values():
+            parts.append(f"{stats['mean']:.1f} ± {stats['std']:.1f}")
+        if len(parts) > 1:
+            keys = ", ".join(entry["values"])
+            return f"η{{{keys}}} = {' / '.join(parts)} %"
+        return f"η = {parts[0]} %"
+    unit = entry.get("unit", "")
+    if entry["measure"] == "range":
+        if entry.get("empty"):
+            return "none (fails without variation)"
+        lo, hi = entry.get("lower", {}), entry.get("upper", {})
+
+        def bound(side: dict[str, Any], mark: str) -> str:
+            if not side or side.get("limit") is None:
+                return "?"
+            text = _signed(side["limit"] - entry["origin"], unit)
+            return f"{mark}{text}" if side.get("hit_cap") else text
+
+        suffix = " cd" if unit == "cd" else ""
+        return f"[{bound(lo, '≤')}, {bound(hi, '≥')}]{suffix}"
+    up = entry.get("upper", {})
+    if not up or up.get("limit") is None:
+        return f"< {entry['origin']:.0f} {unit}"
+    return f"{'≥ ' if up.get('hit_cap') else ''}{up['limit']:.0f} {unit}"
+
+
+def table9(summaries: dict[str, dict[str, Any]], with_paper: bool = True) -> str:
+    """Markdown in the layout of the paper's Table 9: one column per behavior (plus the paper's)."""
+    behaviors = list(summaries)
+    head = ["Experiment"]
+    for b in behaviors:
+        head.append(f"{b.capitalize()} (measured)")
+        if with_paper:
+            head.append(f"{b.capitalize()} (paper)")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for exp in EXPERIMENTS:
+        row = [exp.title]
+        for b in behaviors:
+            entry = summaries[b].get(exp.key)
+            row.append(format_cell(entry) if exp.applies_to(b) else "…")
+            if with_paper:
+                row.append(PAPER_TABLE9[exp.key][b])
+        lines.append("| " + " | ".join(row) + " |")
+    lines.append("")
+    lines.append(f"~100 % means: {AUTONOMY_RULE}. η: mean ± std over seeds. Ranges are offsets from the default "
+                 "(light intensity 1.0, light direction 0°, yaw 0°); ≤/≥ mark a search that reached its cap.")
+    return "\n".join(lines) + "\n"
+
+
+def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out_dir: Path) -> list[Path]:
+    """eta against each varied parameter (pass/fail marked). Needs matplotlib (the plots extra)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ModuleNotFoundError:
+        log.warning("matplotlib is not installed: skipping plots (pip install '.[plots]')")
+        return []
+    written = []
+    for exp in EXPERIMENTS:
+        entry = summary.get(exp.key)
+        if not entry or entry["measure"] == "eta":
+            continue
+        runs = [r for r in records if r["experiment"] == exp.key]
+        if not runs:
+            continue
+        runs.sort(key=lambda r: r["value"])
+        xs = [r["value"] - (entry["origin"] if exp.measure == "range" else 0) for r in runs]
+        ys = [sum(lap["eta"] for lap in r["laps"]) / max(1, len(r["laps"])) for r in runs]
+        ok = [r["autonomous"] for r in runs]
+        fig, ax = plt.subplots(figsize=(6, 3.2), dpi=110)
+        ax.plot(xs, ys, "-", color="0.6", zorder=1)
+        ax.scatter([x for x, o in zip(xs, ok, strict=True) if o], [y for y, o in zip(ys, ok, strict=True) if o],
+                   color="tab:green", label="~100 % (no intervention)", zorder=2)
+        ax.scatter([x for x, o in zip(xs, ok, strict=True) if not o],
+                   [y for y, o in zip(ys, ok, strict=True) if not o], color="tab:red", marker="x",
+                   label="intervention(s)", zorder=2)
+        label = f"{exp.parameter} {'offset ' if exp.measure == 'range' else ''}({exp.unit})"
+        ax.set(xlabel=label, ylabel="η (%)", title=exp.title, ylim=(min(0, min(ys) - 5), 105))
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower left", fontsize=8)
+        fig.tight_layout()
+        path = out_dir / f"{exp.key}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        written.append(path)
+    return written

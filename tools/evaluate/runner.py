@@ -1,0 +1,133 @@
+"""Run scenarios in parallel worker processes, one simulator (and one driver) per worker.
+
+Each run is independent, so a process pool scales them over the cores. Over the socket, several
+workers share one drive server (each opens its own Unity-wire connection); in-process, each worker
+holds its own ONNX Runtime session.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from collections.abc import Callable, Iterable
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """How workers drive: an in-process ONNX model, or a running drive server over the socket."""
+
+    model: str | None = None
+    server: str | None = None
+    threads: int = 1
+    steer_limit_deg: float = 25.0
+    tau: float = 1.0
+
+    def __post_init__(self) -> None:
+        if (self.model is None) == (self.server is None) and self.server is None:
+            raise ValueError("give a model (in-process) or a server URL")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run: which experiment it belongs to, the varied value, the seed and the scenario."""
+
+    experiment: str
+    behavior: str
+    value: Any
+    seed: int
+    scenario: dict[str, Any] = field(default_factory=dict)  # ScenarioConfig keyword arguments
+    map_dir: str | None = None  # write a trajectory map here if the run is not autonomous
+
+
+_DRIVERS: dict[tuple, Any] = {}
+
+
+def _driver(spec: DriverSpec, speed_limit_kmh: float):
+    """One driver per worker process (and per speed limit for the in-process control law)."""
+    from tools.sim.drivers import OnnxDriver, SocketDriver
+
+    key = (spec, speed_limit_kmh if spec.model and not spec.server else None)
+    if key not in _DRIVERS:
+        if spec.server:
+            _DRIVERS[key] = SocketDriver(spec.server)
+        else:
+            _DRIVERS[key] = OnnxDriver(spec.model, speed_limit_kmh=speed_limit_kmh,
+                                       steer_limit_deg=spec.steer_limit_deg, tau=spec.tau, threads=spec.threads)
+    return _DRIVERS[key]
+
+
+def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
+    """Execute one task (in a worker process) and return a JSON-ready record."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    from tools.evaluate.experiments import is_autonomous
+    from tools.sim.session import ScenarioConfig, run_scenario
+
+    config = ScenarioConfig(**task.scenario)
+    started = time.perf_counter()
+    result = run_scenario(config, _driver(spec, config.speed_limit_kmh))
+    record = {"experiment": task.experiment, "behavior": task.behavior, "value": task.value, "seed": task.seed,
+              "wall_time_s": round(time.perf_counter() - started, 3), **result.to_dict()}
+    record["autonomous"] = is_autonomous(record)
+    if task.map_dir and not record["autonomous"]:
+        from tools.sim.viz import write_trajectory_map
+
+        path = Path(task.map_dir) / f"{task.experiment}_{task.value}_seed{task.seed}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_trajectory_map(result, path)
+        record["map"] = str(path)
+    return record
+
+
+def _init_worker() -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+class Runner:
+    """A process pool that records every finished run to a JSON-lines journal as it arrives.
+
+    The journal makes an interrupted evaluation keep its finished runs.
+    """
+
+    def __init__(self, spec: DriverSpec, workers: int, journal: Path,
+                 on_result: Callable[[dict[str, Any]], None] | None = None) -> None:
+        self.spec = spec
+        self.journal = journal
+        self.on_result = on_result
+        self.records: list[dict[str, Any]] = []
+        self._pool = ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_worker)
+
+    def submit(self, task: Task) -> Future:
+        future = self._pool.submit(run_task, self.spec, task)
+        future.add_done_callback(self._record)
+        return future
+
+    def run(self, tasks: Iterable[Task]) -> list[dict[str, Any]]:
+        futures = [self.submit(t) for t in tasks]
+        return [f.result() for f in futures]
+
+    def _record(self, future: Future) -> None:
+        if future.cancelled() or future.exception() is not None:
+            return
+        record = future.result()
+        self.records.append(record)
+        with self.journal.open("a", encoding="utf-8") as fh:
+            fh.write(json.dumps(record) + "\n")
+        if self.on_result:
+            self.on_result(record)
+
+    def close(self, cancel: bool = False) -> None:
+        self._pool.shutdown(wait=not cancel, cancel_futures=cancel)
+
+
+def spec_dict(spec: DriverSpec) -> dict[str, Any]:
+    return asdict(spec)
