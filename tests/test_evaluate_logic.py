@@ -50,7 +50,7 @@ def test_autonomy_is_no_intervention_and_completed():
 
 
 def test_seed_aggregation_mean_and_population_std():
-    s = summarize_eta([run([100.0]), run([90.0]), run([95.0, 85.0])])
+    s = summarize_eta([run([100.0]), run([90.0], interventions=1), run([95.0, 85.0], interventions=1)])
     assert s["mean"] == pytest.approx(93.333333, abs=1e-4)
     assert s["std"] == pytest.approx(4.7140452, abs=1e-4)
     assert s["n"] == 3 and s["autonomous"] == 1
