@@ -1,0 +1,85 @@
+"""``rbc demo``: the whole deployment loop on a fresh machine, in one command.
+
+Starts ``drive_server`` with a bundled model as a separate process, drives one lap of the headless
+simulator against it over the Unity wire protocol, prints the degree of autonomy, lap time and
+latency, and writes a trajectory map and an image strip of the lap.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+log = logging.getLogger("rbc.demo")
+
+#: The track each bundled behavior was trained on (and so is demonstrated on).
+DEMO_SCENES = {"simplistic": {"track": "lake"}, "rigorous": {"track": "mountain"},
+               "collision": {"track": "lake", "cones": 20, "cone_seed": 1}}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--behavior", choices=sorted(DEMO_SCENES), default="simplistic",
+                   help="which bundled model, and its track (default simplistic on lake)")
+    p.add_argument("--model", type=Path, default=None, help="drive with this ONNX model instead of a bundled one")
+    p.add_argument("--laps", type=int, default=1)
+    p.add_argument("--speed-limit", type=float, default=25.0, help="drive_server --speed-limit (km/h)")
+    p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
+
+
+def _server_latency(stats_path: Path) -> str:
+    try:
+        stats = json.loads(stats_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return "server stats unavailable"
+    summary = stats.get("all", stats)
+    total = summary.get("stages_ms", {}).get("total")
+    if not total:
+        return "server stats unavailable"
+    return f"server pipeline (decode to command) p50 {total['p50']:.2f} ms p99 {total['p99']:.2f} ms"
+
+
+def run(args: argparse.Namespace) -> int:
+    from drive_server.models_dir import bundled_model_path
+    from tools.server_process import ServerProcess, ServerStartError
+    from tools.sim.cli import Progress, print_summary
+    from tools.sim.drivers import SocketDriver
+    from tools.sim.session import ScenarioConfig, run_scenario
+    from tools.sim.viz import StripCollector, write_trajectory_map
+
+    model = args.model or bundled_model_path(args.behavior)
+    if not model.is_file():
+        log.error("model not found: %s", model)
+        return 2
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    stats_path = out / "server_stats.json"
+    config = ScenarioConfig(laps=args.laps, speed_limit_kmh=args.speed_limit, **DEMO_SCENES[args.behavior])
+    strip = StripCollector(every_s=8.0)
+    server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0"],
+                           stats_json=stats_path)
+    try:
+        url = server.start()
+    except ServerStartError as exc:
+        log.error("%s", exc)
+        return 2
+    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track}")
+    progress = Progress(f"demo {config.track}")
+    try:
+        with SocketDriver(url) as driver:
+            result = run_scenario(config, driver, progress=progress, on_frame=strip)
+    finally:
+        progress.close()
+        server.cleanup()
+    print()
+    print_summary(result, f"speed limit {args.speed_limit:g} km/h (drive_server)")
+    print(_server_latency(stats_path))
+    (out / "result.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+    print(f"\nmap   {write_trajectory_map(result, out / 'map.png')}")
+    if strip.frames:
+        print(f"strip {strip.write(out / 'strip.png')}")
+    print(f"json  {out / 'result.json'}")
+    etas = ", ".join(f"{lap.eta:.1f} %" for lap in result.laps)
+    print(f"\ndegree of autonomy: {etas}")
+    return 130 if result.interrupted else 0
