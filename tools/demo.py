@@ -33,7 +33,7 @@ def _server_latency(stats_path: Path) -> str:
         stats = json.loads(stats_path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return "server stats unavailable"
-    summary = stats.get("all", stats)
+    summary = stats.get("total", stats)
     total = summary.get("stages_ms", {}).get("total")
     if not total:
         return "server stats unavailable"

@@ -1,0 +1,135 @@
+"""``rbc compare``: the paper's Table 10, side by side for several evaluated models.
+
+Each column is an ``rbc eval`` output folder (robustness), optionally the ``rbc train`` run folder of
+the same model (training time); deployment latency is measured here, with the drive server's own
+per-stage statistics, on the same frames for every model.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import logging
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS
+from tools.evaluate.report import format_cell, write_text
+
+log = logging.getLogger("rbc.compare")
+
+#: Table 10 rows (the paper leaves out the obstacle experiment there).
+TABLE10_EXPERIMENTS = tuple(e for e in EXPERIMENTS if e.key != "obstacles")
+PAPER_TABLE10 = {
+    "NVIDIA's approach (paper)": {
+        "training_time": "~1.8 hr", "latency": "4-7 ms (mode 4.99 ms)", "no_variation": "≈100 %",
+        "light_intensity": "[-0.2, +0.3] cd", "light_direction": "[-3°, +7°]", "position": "≈100 %",
+        "orientation": "[-20°, +10°]", "heading_inversion": "≈100 %", "speed_limit": "50 km/h"},
+    "Our approach (paper)": {
+        "training_time": "~1.4 hr", "latency": "2-6 ms (mode 3.99 ms)", "no_variation": "≈100 %",
+        "light_intensity": "[-0.6, +1.2] cd", "light_direction": "[-30°, +30°]", "position": "≈100 %",
+        "orientation": "[-45°, +10°]", "heading_inversion": "≈100 %", "speed_limit": "100 km/h"},
+}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--eval", dest="evals", type=Path, action="append", required=True, metavar="DIR",
+                   help="an rbc eval output folder (repeat: one per column)")
+    p.add_argument("--label", dest="labels", action="append", default=None, metavar="TEXT",
+                   help="column title (repeat, same order as --eval)")
+    p.add_argument("--train-run", dest="runs", type=Path, action="append", default=None, metavar="DIR",
+                   help="rbc train run folder of the same model, for the training time (same order)")
+    p.add_argument("--frames", type=int, default=2000, help="frames per latency measurement")
+    p.add_argument("--no-paper", action="store_true", help="leave out the paper's columns")
+    p.add_argument("--out", type=Path, required=True, help="Markdown file to write (and .json beside it)")
+
+
+def training_time_s(run_dir: Path | None) -> float | None:
+    """Wall seconds of a training run: the sum of history.csv's per-epoch seconds."""
+    if run_dir is None:
+        return None
+    history = run_dir / "history.csv"
+    if not history.is_file():
+        log.warning("no history.csv in %s: training time unknown", run_dir)
+        return None
+    with history.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    key = next((k for k in ("seconds", "epoch_seconds", "wall_s", "time_s") if rows and k in rows[0]), None)
+    return sum(float(r[key]) for r in rows) if key else None
+
+
+def measure_latency(model: Path, frames: int) -> dict[str, Any]:
+    """Serve ``model`` with drive_server and drive it with the Unity-wire client; server stats + round trip."""
+    import numpy as np
+
+    from tools.bench import drive
+    from tools.server_process import ServerProcess
+
+    with tempfile.TemporaryDirectory(prefix="rbc_compare_") as tmp:
+        stats_path = Path(tmp) / "stats.json"
+        with ServerProcess(model, ["--log-every", "0"], stats_json=stats_path) as server:
+            rtts, _ = drive(server.url, None, 1, frames, 100)
+        stats = json.loads(stats_path.read_text(encoding="utf-8")) if stats_path.is_file() else {}
+    total = stats.get("total", {}).get("stages_ms", {}).get("total", {})
+    p50, p99 = (float(v) for v in np.percentile(rtts, [50, 99]) * 1e3)
+    return {"server_total_ms": total, "round_trip_ms": {"p50": p50, "p99": p99, "max": float(rtts.max() * 1e3)}}
+
+
+def _fmt_time(seconds: float | None) -> str:
+    if seconds is None:
+        return "n/a"
+    return f"{seconds / 60:.1f} min" if seconds < 3600 else f"{seconds / 3600:.2f} hr"
+
+
+def _fmt_latency(lat: dict[str, Any]) -> str:
+    total = lat.get("server_total_ms") or {}
+    rt = lat["round_trip_ms"]
+    server = f"server {total['p50']:.2f} ms (p99 {total['p99']:.2f}, max {total['max']:.1f})" if total else ""
+    return f"{server}; round trip {rt['p50']:.2f} ms (p99 {rt['p99']:.2f})".lstrip("; ")
+
+
+def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
+    head = ["Parameter"] + [c["label"] for c in columns]
+    paper = list(PAPER_TABLE10.items()) if with_paper else []
+    head += [name for name, _ in paper]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def row(title: str, cells: list[str], key: str) -> None:
+        lines.append("| " + " | ".join([title, *cells, *(p[key] for _, p in paper)]) + " |")
+
+    row("Training time", [_fmt_time(c["training_time_s"]) for c in columns], "training_time")
+    row("Deployment latency", [_fmt_latency(c["latency"]) for c in columns], "latency")
+    for exp in TABLE10_EXPERIMENTS:
+        row(exp.title, [format_cell(c["summary"].get(exp.key)) for c in columns], exp.key)
+    lines += ["", f"~100 % means: {AUTONOMY_RULE}. Latency: drive_server's own decode-to-command time "
+              "and the Unity-wire round trip on this machine (the paper: preprocessing to command on an RTX 2070)."]
+    return "\n".join(lines) + "\n"
+
+
+def run(args: argparse.Namespace) -> int:
+    labels = args.labels or [d.name for d in args.evals]
+    runs = args.runs or [None] * len(args.evals)
+    if len(labels) != len(args.evals) or len(runs) != len(args.evals):
+        log.error("give as many --label and --train-run as --eval (or none)")
+        return 2
+    columns = []
+    for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
+        results_path = eval_dir / "results.json"
+        if not results_path.is_file():
+            log.error("%s has no results.json: run rbc eval --out %s first", eval_dir, eval_dir)
+            return 2
+        results = json.loads(results_path.read_text(encoding="utf-8"))
+        model = Path(results["meta"]["model"])
+        log.info("measuring the deployment latency of %s", model)
+        columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),
+                        "model_sha256": results["meta"]["model_sha256"], "summary": results["summary"],
+                        "training_time_s": training_time_s(run_dir), "latency": measure_latency(model, args.frames)})
+    table = build_table(columns, with_paper=not args.no_paper)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    write_text(args.out, table)
+    write_text(args.out.with_suffix(".json"), json.dumps(columns, indent=2, default=str))
+    print(table)
+    print(f"wrote {args.out}")
+    return 0
