@@ -1,0 +1,197 @@
+"""``rbc sim-bench``: world build time and frames/s of the headless renderer, plus a contact sheet.
+
+Measures what the experiments pay for: building a world (cold, and again for a new light direction),
+rendering one camera and all three per step on one core (``cv2.setNumThreads(1)`` by default), the JPEG
+encoding a Unity-wire client adds, and writes a sheet of sample frames (lake, bridge, cones, mountain,
+light intensity and direction sweeps) to look at. Timings are the best of N runs, as wall-clock and as
+CPU-time rates (the latter stays meaningful when other processes share the cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tools.sim.render import Renderer
+from tools.sim.track import Track, load_track, place_cones
+from tools.sim.world import Pose, clear_caches, get_world
+
+log = logging.getLogger(__name__)
+JPEG_QUALITY = 75
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--tracks", nargs="+", default=["lake", "mountain"],
+                        help="built-in track names or track files (default: lake mountain)")
+    parser.add_argument("--frames", type=int, default=600, help="frames per timing run (default 600)")
+    parser.add_argument("--repeats", type=int, default=3, help="timing runs; the best is reported (default 3)")
+    parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1: per-core numbers)")
+    parser.add_argument("--cones", type=int, default=20, help="cones for the lake-with-cones run (default 20)")
+    parser.add_argument("--seed", type=int, default=1, help="cone placement seed (default 1)")
+    parser.add_argument("--sheet", type=Path, default=Path("out/sim_sheet.png"),
+                        help="contact sheet of sample frames (default out/sim_sheet.png)")
+    parser.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
+
+
+def run(args: argparse.Namespace) -> int:
+    cv2.setNumThreads(args.threads)
+    print(f"rbc sim-bench: 320x160 RGB, OpenCV threads {args.threads}, best of {args.repeats} x {args.frames} frames")
+    tracks = [load_track(t) for t in args.tracks]
+    for track in tracks:
+        bench_track(track, args)
+    lake = next((t for t in tracks if t.name == "lake"), None)
+    if lake is not None and args.cones:
+        bench_track(lake, args, cones=place_cones(lake, args.cones, args.seed), builds=False)
+    report = lap_wall_time(tracks, args)
+    if report:
+        print(report)
+    if not args.no_sheet:
+        path = write_sheet(tracks, args)
+        print(f"contact sheet: {path}")
+    return 0
+
+
+def driving_poses(track: Track, n: int) -> list[Pose]:
+    """``n`` poses spread over one lap, weaving a little around the lane centre like a real driver."""
+    lane = -track.road_width / 4 if track.lanes == 2 else 0.0
+    poses = []
+    for s in np.linspace(0.0, track.length, n, endpoint=False):
+        x, y, h = track.point_at(s)
+        off = lane + 0.8 * math.sin(s / 37.0)
+        yaw = h + 0.06 * math.sin(s / 23.0)
+        poses.append(Pose(x - math.sin(h) * off, y + math.cos(h) * off, yaw))
+    return poses
+
+
+def _time_frames(fn, poses: list[Pose], repeats: int) -> tuple[float, float]:
+    """(wall, cpu) calls per second of ``fn(pose)`` over ``poses``: the best of ``repeats`` runs each.
+
+    The CPU-time rate counts only the time this process ran, so it stays meaningful on a busy machine.
+    """
+    for p in poses:  # warm up: first touches of the texture pages, visibility cells, LUTs
+        fn(p)
+    wall, cpu = [], []
+    for _ in range(max(1, repeats)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        for p in poses:
+            fn(p)
+        wall.append(len(poses) / (time.perf_counter() - t0))
+        cpu.append(len(poses) / max(time.process_time() - c0, 1e-9))
+    return max(wall), max(cpu)
+
+
+def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None = None, builds: bool = True) -> None:
+    label = f"{track.name}" + (f" + {len(cones)} cones" if cones is not None else "")
+    if builds:
+        clear_caches()
+        t0 = time.perf_counter()
+        world = get_world(track)
+        cold = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        get_world(track, light_direction_deg=10.0)
+        relight = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        world = get_world(track)
+        hit = time.perf_counter() - t0
+        g = world.ground
+        h, w = g.mips[0].shape[:2]
+        print(f"\n{label}: {track.length:.0f} m, ground texture {w}x{h} at {g.res * 100:.1f} cm/texel, "
+              f"{len(world.props.trees)} trees, {len(world.props.poles)} poles")
+        print(f"  world build: {cold:.2f} s cold, {relight:.2f} s for a new light direction, "
+              f"{hit * 1e3:.2f} ms cached")
+    else:
+        t0 = time.perf_counter()
+        world = get_world(track, cones=cones)
+        print(f"\n{label}: world build {time.perf_counter() - t0:.2f} s")
+    renderer = Renderer(world)
+    poses = driving_poses(track, args.frames)
+    best, cpu = _time_frames(lambda p: renderer.render(p, "center"), poses, args.repeats)
+    print(f"  centre camera: {best:6.0f} frames/s wall ({1e3 / best:.2f} ms/frame), {cpu:.0f} frames per CPU-second")
+    best3, cpu3 = _time_frames(lambda p: [renderer.render(p, c) for c in ("left", "center", "right")],
+                               poses, args.repeats)
+    print(f"  3 cameras:     {best3:6.0f} steps/s = {3 * best3:.0f} frames/s wall, "
+          f"{3 * cpu3:.0f} frames per CPU-second")
+    if builds:
+        dim, dim_cpu = _time_frames(lambda p: renderer.render(p, "center", light_intensity=0.6), poses, args.repeats)
+        jit, jit_cpu = _time_frames(lambda p: renderer.render(p, "center", pitch_deg=0.5, roll_deg=-0.4), poses,
+                              args.repeats)
+        print(f"  centre camera, light intensity 0.6: {dim:.0f} frames/s wall ({dim_cpu:.0f}/CPU-s); "
+              f"with pitch/roll jitter: {jit:.0f} ({jit_cpu:.0f}/CPU-s)")
+        frames = [cv2.cvtColor(renderer.render(p), cv2.COLOR_RGB2BGR) for p in poses[:200]]
+        params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY]
+        t0 = time.perf_counter()
+        sizes = [len(cv2.imencode(".jpg", f, params)[1]) for f in frames]
+        enc = (time.perf_counter() - t0) / len(frames)
+        print(f"  JPEG encode (quality {JPEG_QUALITY}): {enc * 1e3:.2f} ms/frame, "
+              f"{np.mean(sizes) / 1024:.1f} KiB/frame")
+
+
+def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
+    """Hook for the session benchmark (a full autopilot lap: physics, rules and rendering).
+
+    The session module owns laps; until it provides a benchmark this returns None and only the
+    renderer is measured.
+    """
+    return None
+
+
+# ---------------------------------------------------------------------------------------------- sheet
+
+
+def _label(img: np.ndarray, text: str) -> np.ndarray:
+    out = img.copy()
+    cv2.putText(out, text, (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 0), 2, cv2.LINE_AA)
+    cv2.putText(out, text, (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
+    return out
+
+
+def _pose_at(track: Track, s: float, offset: float = 0.0) -> Pose:
+    x, y, h = track.point_at(s)
+    return Pose(x - math.sin(h) * offset, y + math.cos(h) * offset, h)
+
+
+def write_sheet(tracks: list[Track], args: argparse.Namespace) -> Path:
+    """Rows of four labelled frames: each track, the bridge, cones, light intensity and direction sweeps."""
+    rows: list[list[np.ndarray]] = []
+    by_name = {t.name: t for t in tracks}
+    for track in tracks:
+        r = Renderer(get_world(track))
+        lane = -track.road_width / 4 if track.lanes == 2 else 0.0
+        s_list = np.linspace(0, track.length, 9, endpoint=False)[1::2]
+        rows.append([_label(r.render(_pose_at(track, s, lane)), f"{track.name} s={s:.0f}") for s in s_list])
+        p = _pose_at(track, s_list[1], lane)
+        rows.append([_label(r.render(p, cam), f"{track.name} {cam} camera") for cam in ("left", "center", "right")]
+                    + [_label(r.render(p, "center", pitch_deg=1.5, roll_deg=-1.5), "pitch +1.5, roll -1.5")])
+        bridges = [sf for sf in track.surfaces if sf.kind == "bridge"]
+        if bridges:
+            b = bridges[0]
+            rows.append([_label(r.render(_pose_at(track, b.from_s + d, lane)), f"bridge {d:+.0f} m")
+                         for d in (-25.0, -8.0, 10.0, 35.0)])
+    lake = by_name.get("lake")
+    if lake is not None and args.cones:
+        cones = place_cones(lake, args.cones, args.seed)
+        r = Renderer(get_world(lake, cones=cones))
+        tiles = []
+        for k, ahead in enumerate((6.0, 10.0, 16.0, 25.0)):
+            proj = lake.project(*cones[3 * k])
+            tiles.append(_label(r.render(_pose_at(lake, proj.s - ahead)), f"cone {3 * k}, {ahead:.0f} m ahead"))
+        rows.append(tiles)
+        r = Renderer(get_world(lake))
+        p = _pose_at(lake, 60.0)
+        rows.append([_label(r.render(p, light_intensity=v), f"light intensity {v:.1f}") for v in (0.2, 0.6, 1.4, 2.0)])
+    mountain = by_name.get("mountain", tracks[-1])
+    p = _pose_at(mountain, 210.0, -mountain.road_width / 4 if mountain.lanes == 2 else 0.0)
+    rows.append([_label(Renderer(get_world(mountain, d)).render(p), f"light direction {d:+.0f} deg")
+                 for d in (-30.0, -10.0, 10.0, 30.0)])
+    width = max(len(r) for r in rows)
+    blank = np.zeros_like(rows[0][0])
+    sheet = np.concatenate([np.concatenate(r + [blank] * (width - len(r)), 1) for r in rows], 0)
+    args.sheet.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(args.sheet), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+    return args.sheet

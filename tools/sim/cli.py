@@ -1,0 +1,188 @@
+"""``rbc sim``: drive laps of the headless simulator with a drive server or an ONNX model, print the score."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from protocol import SpeedUnit
+
+log = logging.getLogger("rbc.sim")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    who = p.add_mutually_exclusive_group(required=True)
+    who.add_argument("--server", metavar="URL", help="drive server to talk to over the Unity wire "
+                     "(e.g. http://127.0.0.1:4567); its own --speed-limit applies")
+    who.add_argument("--model", type=Path, metavar="M.onnx", help="run this ONNX model in-process (no socket)")
+    who.add_argument("--autopilot", action="store_true", help="let the scripted autopilot drive (reference)")
+    p.add_argument("--track", default="lake", help="built-in track name or track JSON path (default lake)")
+    p.add_argument("--laps", type=int, default=1)
+    p.add_argument("--light-intensity", type=float, default=1.0, help="scene light intensity (default 1.0)")
+    p.add_argument("--light-direction", type=float, default=0.0, help="sun direction offset, degrees")
+    p.add_argument("--cones", type=int, default=0, help="traffic cones on the road")
+    p.add_argument("--cone-seed", type=int, default=0)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--spawn-s", type=float, default=None, metavar="M", help="spawn this many metres along")
+    where.add_argument("--spawn-frac", type=float, default=None, metavar="F", help="spawn at this fraction of a lap")
+    p.add_argument("--yaw-offset", type=float, default=0.0, metavar="DEG", help="spawn heading offset (+ = left)")
+    p.add_argument("--reverse", action="store_true", help="spawn facing the other way and drive the lap reversed")
+    p.add_argument("--speed-limit", type=float, default=25.0, help="v_l of Eq. 14 in km/h for --model (default 25)")
+    p.add_argument("--steer-limit", type=float, default=25.0, help="delta of Eq. 14 in degrees for --model")
+    p.add_argument("--tau", type=float, default=1.0, help="tau of Eq. 14 for --model")
+    p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
+    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=SpeedUnit.MPH.value,
+                   help="telemetry speed unit (default mph like the stock simulator)")
+    p.add_argument("--realtime", action="store_true",
+                   help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
+    p.add_argument("--control-hz", type=float, default=15.0, help="lock-step commands per simulated second")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-lap-time", type=float, default=None, metavar="S", help="give up a lap after S sim seconds")
+    p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the full result as JSON")
+    p.add_argument("--map", type=Path, default=None, metavar="PNG", help="top-down trajectory map")
+    p.add_argument("--strip", type=Path, default=None, metavar="PNG", help="grid of camera frames")
+    p.add_argument("--strip-every", type=float, default=8.0, metavar="S", help="strip: one frame every S seconds")
+    p.add_argument("--video", type=Path, default=None, metavar="MP4", help="annotated camera video (mp4v)")
+
+
+class Progress:
+    """tqdm when installed (the train extra), otherwise a log line every 10 %."""
+
+    def __init__(self, desc: str, logger: logging.Logger = log) -> None:
+        self.desc, self.log = desc, logger
+        self._bar = None
+        self._last = -1
+        try:
+            from tqdm import tqdm
+        except ImportError:
+            tqdm = None
+        self._tqdm = tqdm
+
+    def __call__(self, done: float, total: float) -> None:
+        if self._tqdm is not None:
+            if self._bar is None:
+                self._bar = self._tqdm(total=round(total), desc=self.desc, unit="m", dynamic_ncols=True)
+            self._bar.update(round(done) - self._bar.n)
+            return
+        tenth = int(10 * done / total) if total else 10
+        if tenth > self._last:
+            self._last = tenth
+            self.log.info("%s: %3d %% (%.0f of %.0f m)", self.desc, 10 * tenth, done, total)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _driver(args: argparse.Namespace):
+    from tools.sim.drivers import AutopilotDriver, OnnxDriver, SocketDriver
+
+    if args.server:
+        return SocketDriver(args.server)
+    if args.model:
+        return OnnxDriver(args.model, speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
+                          tau=args.tau, speed_unit=args.speed_unit, threads=args.threads)
+    return AutopilotDriver(speed_kmh=args.speed_limit, seed=args.seed)
+
+
+def print_summary(result, speed_limit_note: str) -> None:
+    """The per-lap table and the run's totals."""
+    cfg = result.config
+    print(f"track {cfg.track} ({result.track_length_m:.0f} m), driver {result.driver}, {speed_limit_note}")
+    head = (f"{'lap':>3}  {'eta %':>6}  {'int':>3}  {'causes':<26} {'time s':>7}  {'km/h':>5}  "
+            f"{'cte rms':>7}  {'cte max':>7}  {'coll':>4}  {'lane':>4}")
+    print(head)
+    print("-" * len(head))
+    for lap in result.laps:
+        causes = ", ".join(f"{k} {v}" for k, v in sorted(lap.causes().items())) or "-"
+        eta = f"{lap.eta:6.1f}" + ("*" if lap.eta_clamped else " ")
+        flag = "" if lap.completed else "  (not finished)"
+        print(f"{lap.lap:>3}  {eta:>7} {lap.n_interventions:>3}  {causes:<26} {lap.lap_time_s:>7.1f}  "
+              f"{lap.mean_speed_kmh:>5.1f}  {lap.cte_rms_m:>7.2f}  {lap.cte_max_m:>7.2f}  {lap.collisions:>4}  "
+              f"{lap.lane_departures:>4}{flag}")
+    if any(lap.eta_clamped for lap in result.laps):
+        print("* Eq. 1 went below 0 (more intervention time than lap time) and was clamped at 0")
+    for lap in result.laps:
+        for i in lap.interventions:
+            print(f"    lap {lap.lap}: {i.cause:<9} at s={i.s:7.1f} m  (x={i.x:7.1f}, y={i.y:7.1f})  t={i.t:7.1f} s")
+    mode = "real time" if cfg.realtime else f"lock-step {cfg.control_hz:g} Hz"
+    print(f"wall {result.wall_time_s:.2f} s for {result.sim_time_s:.1f} s simulated ({mode}), "
+          f"{result.frames} frames ({result.frames / max(result.wall_time_s, 1e-9):.0f}/s), "
+          f"latency p50 {result.latency_ms_p50:.2f} ms p99 {result.latency_ms_p99:.2f} ms"
+          + ("  [interrupted]" if result.interrupted else ""))
+
+
+def run(args: argparse.Namespace) -> int:
+    from tools.sim.session import ScenarioConfig, get_track, run_scenario
+
+    spawn_s = args.spawn_s
+    if args.spawn_frac is not None:
+        spawn_s = args.spawn_frac * get_track(args.track).length
+    config = ScenarioConfig(
+        track=args.track, laps=args.laps, light_intensity=args.light_intensity,
+        light_direction_deg=args.light_direction, cones=args.cones, cone_seed=args.cone_seed, spawn_s=spawn_s,
+        yaw_offset_deg=args.yaw_offset, reverse=args.reverse, speed_limit_kmh=args.speed_limit,
+        realtime=args.realtime, control_hz=args.control_hz, seed=args.seed, max_lap_time_s=args.max_lap_time,
+        speed_unit=args.speed_unit)
+    if args.server:
+        note = "speed limit: the drive server's own (--speed-limit applies to --model only)"
+        if args.speed_limit != 25.0:
+            log.warning("--speed-limit %g is ignored with --server: the drive server applies its own",
+                        args.speed_limit)
+    else:
+        note = f"speed limit {args.speed_limit:g} km/h"
+
+    hooks = []
+    strip = video = None
+    if args.strip:
+        from tools.sim.viz import StripCollector
+
+        strip = StripCollector(every_s=args.strip_every)
+        hooks.append(strip)
+    if args.video:
+        from tools.sim.viz import VideoRecorder
+
+        fps = 60.0 if args.realtime else args.control_hz
+        video = VideoRecorder(args.video, fps)
+        hooks.append(video)
+
+    def on_frame(event) -> None:
+        for hook in hooks:
+            hook(event)
+
+    from drive_server.model import ModelError
+
+    try:
+        driver = _driver(args)
+    except ModelError as exc:
+        log.error("%s", exc)
+        return 2
+    progress = Progress(f"sim {args.track}")
+    try:
+        result = run_scenario(config, driver, progress=progress, on_frame=on_frame if hooks else None)
+    except (OSError, TimeoutError) as exc:  # refused, closed or silent drive server
+        log.error("driving with %s failed: %s", driver.name, exc)
+        return 2
+    finally:
+        progress.close()
+        driver.close()
+        if video is not None:
+            video.close()
+    print_summary(result, note)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+        print(f"json  {args.json}")
+    if args.map:
+        from tools.sim.viz import write_trajectory_map
+
+        print(f"map   {write_trajectory_map(result, args.map)}")
+    if strip is not None and strip.frames:
+        print(f"strip {strip.write(args.strip)}")
+    if video is not None and video.frames:
+        print(f"video {args.video} ({video.frames} frames)")
+    if result.interrupted:
+        return 130
+    return 0

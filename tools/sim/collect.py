@@ -1,0 +1,207 @@
+"""Record a training set with the autopilot, in the Udacity simulator's log format.
+
+Output: ``DIR/driving_log.csv`` (no header, ``", "`` separators, absolute image paths, columns
+center, left, right, steering -1..1, throttle 0..1, brake 0..1, speed in mph or km/h; left/right
+empty with one camera) and ``DIR/IMG/{center,left,right}_YYYY_MM_DD_HH_MM_SS_mmm.jpg`` named by
+simulated time, so any Udacity-style training script reads it.
+
+The autopilot decides every physics frame, like a person at a keyboard; rows are recorded at
+``rate_hz`` with the steering key axis at that moment as the label (what Unity logs). Each row is
+written with one ``write`` and flushed after its images exist, so Ctrl-C leaves a consistent log:
+never a half row, never a row without its images (the images of an unfinished row are removed).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from protocol import SpeedUnit
+from protocol.units import from_kmh
+from tools.sim.autopilot import Autopilot, AutopilotParams
+from tools.sim.rules import LapResult
+from tools.sim.session import ScenarioConfig, Simulation
+
+log = logging.getLogger(__name__)
+
+LOG_NAME = "driving_log.csv"
+IMAGE_DIR = "IMG"
+CAMERA_NAMES = ("center", "left", "right")
+JPEG_QUALITY = 75  # Unity's EncodeToJPG default, the same as the telemetry frames
+_EPOCH = dt.datetime(2020, 1, 1, 12, 0, 0)  # first timestamp of a new log (fixed: runs are reproducible)
+
+
+class OutputDirError(ValueError):
+    """The output directory is not empty and neither overwrite nor append was asked for."""
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    track: str = "lake"
+    laps: int = 1  # per direction
+    both_directions: bool = False  # then the same number of laps again, driven in reverse
+    cones: int = 0
+    cone_seed: int = 0
+    cameras: int = 3  # 1 (centre only) or 3
+    rate_hz: float = 15.0  # rows per simulated second (the paper's code: every 0.0667 s)
+    seed: int = 0
+    speed_kmh: float = 30.0  # the paper's data collection speed
+    speed_unit: str = SpeedUnit.MPH.value
+    light_intensity: float = 1.0
+    light_direction_deg: float = 0.0
+    sim_fps: int = 60
+
+    def __post_init__(self) -> None:
+        if self.cameras not in (1, 3):
+            raise ValueError(f"cameras must be 1 or 3, got {self.cameras}")
+        if not 0 < self.rate_hz <= self.sim_fps:
+            raise ValueError(f"rate_hz must be in (0, {self.sim_fps}], got {self.rate_hz}")
+        if self.laps < 1:
+            raise ValueError(f"laps must be >= 1, got {self.laps}")
+        SpeedUnit(self.speed_unit)
+
+
+@dataclass
+class CollectResult:
+    out_dir: Path
+    rows: int
+    zero_steer_rows: int
+    laps: list[LapResult] = field(default_factory=list)
+    sim_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    interrupted: bool = False
+
+    @property
+    def zero_steer_share(self) -> float:
+        return self.zero_steer_rows / self.rows if self.rows else 0.0
+
+    @property
+    def interventions(self) -> int:
+        return sum(lap.n_interventions for lap in self.laps)
+
+
+def _num(x: float) -> str:
+    """A number as Unity/C# writes it in the log: ``0``, ``-0.2095149``, ``7.843922E-05``."""
+    if x == 0:
+        return "0"
+    return f"{x:.7g}".replace("e", "E")
+
+
+def _stamp(when: dt.datetime) -> str:
+    return when.strftime("%Y_%m_%d_%H_%M_%S_") + f"{when.microsecond // 1000:03d}"
+
+
+def _last_stamp(log_path: Path) -> dt.datetime | None:
+    """Timestamp of the last row of an existing log (to append after it), if it has one we can read."""
+    if not log_path.is_file():
+        return None
+    lines = [ln for ln in log_path.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
+    if not lines:
+        return None
+    name = lines[-1].split(",")[0].strip().replace("\\", "/").rsplit("/", 1)[-1]
+    stem = name.rsplit(".", 1)[0].split("_", 1)[-1]
+    try:
+        return dt.datetime.strptime(stem[:-4], "%Y_%m_%d_%H_%M_%S") + dt.timedelta(milliseconds=int(stem[-3:]))
+    except ValueError:
+        return None
+
+
+def prepare_output(out_dir: Path, overwrite: bool = False, append: bool = False) -> dt.datetime:
+    """Create or check the output folder; return the timestamp of the first new row."""
+    if overwrite and append:
+        raise ValueError("choose overwrite or append, not both")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if any(out_dir.iterdir()):
+        if overwrite:
+            (out_dir / LOG_NAME).unlink(missing_ok=True)
+            shutil.rmtree(out_dir / IMAGE_DIR, ignore_errors=True)
+        elif not append:
+            raise OutputDirError(f"{out_dir} is not empty; pass --overwrite to replace its log and images "
+                                 f"or --append to add to them")
+    (out_dir / IMAGE_DIR).mkdir(exist_ok=True)
+    last = _last_stamp(out_dir / LOG_NAME) if append else None
+    return _EPOCH if last is None else last + dt.timedelta(seconds=10)
+
+
+def _write_jpeg(path: Path, rgb: np.ndarray) -> None:
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:
+        raise OSError(f"JPEG encoding failed for {path}")
+    path.write_bytes(buf.tobytes())
+
+
+def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, append: bool = False,
+            progress: Callable[[float, float], None] | None = None) -> CollectResult:
+    """Drive ``config.laps`` laps (per direction) with the autopilot and record them to ``out_dir``."""
+    out_dir = Path(out_dir).resolve()
+    start = prepare_output(out_dir, overwrite, append)
+    result = CollectResult(out_dir=out_dir, rows=0, zero_steer_rows=0)
+    directions = (False, True) if config.both_directions else (False,)
+    wall0 = time.perf_counter()
+    clock = 0.0  # simulated seconds over all drives (timestamps)
+    cameras = CAMERA_NAMES[: config.cameras]
+    img_dir = out_dir / IMAGE_DIR
+    pending: list[Path] = []
+    with open(out_dir / LOG_NAME, "a", encoding="utf-8", newline="") as csv_file:
+        try:
+            for k, reverse in enumerate(directions):
+                scenario = ScenarioConfig(
+                    track=config.track, laps=config.laps, cones=config.cones, cone_seed=config.cone_seed,
+                    reverse=reverse, seed=config.seed + k, speed_limit_kmh=config.speed_kmh,
+                    light_intensity=config.light_intensity, light_direction_deg=config.light_direction_deg,
+                    sim_fps=config.sim_fps, control_hz=config.sim_fps)
+                sim = Simulation(scenario)
+                pilot = Autopilot(sim.track, sim.direction, sim.cones,
+                                  replace(AutopilotParams(), speed_kmh=config.speed_kmh), sim.params,
+                                  seed=config.seed * 2 + k)
+                total_m = len(directions) * config.laps * sim.track.length
+                done_before = k * config.laps * sim.track.length
+                dt_frame = sim.params.dt
+                next_row = 0.0
+                next_report = 0.0
+                while not sim.done:
+                    command = pilot.update(dt_frame, sim.vehicle.state)
+                    if sim.t >= next_row - 1e-9:
+                        next_row += 1.0 / config.rate_hz
+                        stamp = _stamp(start + dt.timedelta(seconds=round(clock + sim.t, 3)))
+                        jitter = sim.camera_jitter()
+                        paths = [img_dir / f"{cam}_{stamp}.jpg" for cam in cameras]
+                        pending = paths
+                        for cam, path in zip(cameras, paths, strict=True):
+                            _write_jpeg(path, sim.render(cam, jitter))
+                        st = sim.vehicle.state
+                        images = [str(p) for p in paths] + [""] * (3 - len(paths))
+                        speed = from_kmh(st.speed * 3.6, config.speed_unit)
+                        row = ", ".join(images + [_num(command.steering), _num(max(0.0, command.throttle)),
+                                                  _num(max(0.0, -command.throttle)), _num(speed)])
+                        pending = []  # from here on an interrupt may orphan images, never a row
+                        csv_file.write(row + "\n")
+                        csv_file.flush()
+                        result.rows += 1
+                        result.zero_steer_rows += command.steering == 0.0
+                    sim.advance(1, command)
+                    if progress is not None and sim.t >= next_report:
+                        next_report = sim.t + 1.0
+                        progress(done_before + min(max(0.0, sim.progress), config.laps * sim.track.length), total_m)
+                clock += sim.t + 10.0
+                result.sim_time_s += sim.t
+                result.laps.extend(sim.laps)
+                for lap in sim.laps:
+                    if lap.interventions:
+                        log.warning("%s lap %d: the autopilot needed %d intervention(s) %s; the log has a jump there",
+                                    "reverse" if reverse else "forward", lap.lap, lap.n_interventions, lap.causes())
+        except KeyboardInterrupt:
+            result.interrupted = True
+            for path in pending:  # images of a row that was never written
+                path.unlink(missing_ok=True)
+            log.warning("interrupted: %d complete rows in %s", result.rows, out_dir / LOG_NAME)
+    result.wall_time_s = time.perf_counter() - wall0
+    return result

@@ -1,0 +1,138 @@
+"""The headless renderer: 320x160 RGB frames of a :class:`~tools.sim.world.World` from the car's cameras.
+
+Per frame: the sky is one remap of the panorama, the ground is an affine transform of precomputed
+car-frame ground points followed by one ``cv2.remap`` per mip band, distant rows are blended into the
+haze, props are painted far to near, and light intensity rescales each pixel's direct-light share
+(kept in the frame's alpha channel) before the alpha is dropped. Bumps are an exact homography warp.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from tools.sim.camera import (
+    CAMERA_OFFSETS,
+    IMG_H,
+    IMG_W,
+    CameraModel,
+    camera_models,
+    jitter_homography,
+    jitter_rotation,
+)
+from tools.sim.sky import EL_BOTTOM, EL_TOP, PANO_H, PANO_W, SKY_DIRECT_SHARE
+from tools.sim.sprites import PropPainter
+from tools.sim.world import Pose, World
+
+__all__ = ["CAMERA_OFFSETS", "IMG_H", "IMG_W", "Pose", "Renderer"]
+
+SKY_PAD = PANO_W // 4  # panorama columns repeated on each side (a camera sees at most 1/4 turn to either side)
+
+
+class _CameraState:
+    """A camera model plus the per-world tables (mip bands, sky row map, haze block) it renders with."""
+
+    def __init__(self, model: CameraModel, world: World) -> None:
+        self.model = model
+        g = world.ground
+        self.bands = [(lvl, model.horizon_row + a, model.horizon_row + b, model.ground_xy[a:b])
+                      for lvl, a, b in model.mip_bands(g.res)]
+        self.sky_x = np.ascontiguousarray(model.sky_azimuth * np.float32(PANO_W / 360.0))
+        rows = (EL_TOP - model.sky_elevation) / (EL_TOP - EL_BOTTOM) * (PANO_H - 1)
+        self.sky_y = np.ascontiguousarray(rows, dtype=np.float32)
+        haze = np.array(world.haze + (round(255 * SKY_DIRECT_SHARE),), np.uint8)
+        self.haze_block = np.ascontiguousarray(np.broadcast_to(haze, (model.fog_rows, IMG_W, 4)))
+
+
+class Renderer:
+    """Renders frames of one world. Not thread-safe (it reuses a scratch frame); make one per thread."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.props = PropPainter(world)
+        self.cameras = {name: _CameraState(model, world) for name, model in camera_models().items()}
+        self._fb = np.empty((IMG_H, IMG_W, 4), np.uint8)
+        # the panorama with wrapped margins: cv2.remap's BORDER_WRAP path is ~3x slower than a plain lookup
+        pano = world.panorama
+        self._sky = np.ascontiguousarray(np.concatenate([pano[:, -SKY_PAD:], pano, pano[:, :SKY_PAD]], 1))
+        self._lut_cache: dict[float, tuple[np.ndarray, float]] = {}
+
+    def render(self, pose: Pose, camera: str = "center", light_intensity: float = 1.0,
+               pitch_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
+        """One RGB frame (160, 320, 3) uint8 from ``camera`` ("center", "left" or "right") of a car at ``pose``.
+
+        ``light_intensity`` scales the direct sunlight (1 = the world's default; ambient light stays),
+        ``pitch_deg``/``roll_deg`` tilt the camera for this frame (bumps; + = nose up / right side down).
+        """
+        try:
+            cam = self.cameras[camera]
+        except KeyError:
+            raise ValueError(f"unknown camera {camera!r}; expected one of {sorted(self.cameras)}") from None
+        m = cam.model
+        fb = self._fb
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        hr = m.horizon_row
+
+        # sky: panorama column from the absolute azimuth of each pixel
+        if hr > 0:
+            shift = np.float32((math.degrees(pose.yaw) % 360.0) * PANO_W / 360.0 + SKY_PAD)
+            cv2.remap(self._sky, cam.sky_x + shift, cam.sky_y, cv2.INTER_LINEAR, dst=fb[:hr],
+                      borderMode=cv2.BORDER_REPLICATE)
+
+        # ground: car-frame points -> texel coordinates of each mip level -> bilinear lookups
+        g = self.world.ground
+        inv = 1.0 / g.res
+        tx = pose.x - g.x0  # the camera offset is already inside ground_xy
+        ty = g.y1 - pose.y
+        for lvl, a, b, pts in cam.bands:
+            k = inv / (1 << lvl)
+            half = 0.5 - 0.5 / (1 << lvl)  # pyrDown texel centres sit between their parents
+            mat = np.array([[c * k, -s * k, tx * k - half], [-s * k, -c * k, ty * k - half]], np.float32)
+            maps = cv2.transform(pts, mat)
+            cv2.remap(g.mips[lvl], maps, None, cv2.INTER_LINEAR, dst=fb[a:b], borderMode=cv2.BORDER_CONSTANT,
+                      borderValue=g.border)
+        if m.fog_rows:
+            rows = fb[hr:hr + m.fog_rows]
+            rows[:] = cv2.blendLinear(rows, cam.haze_block, m.clear, m.fog)
+
+        axes = m.axes @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # camera axes, world coordinates
+        if pitch_deg or roll_deg:  # a rotated camera sees the same image through a homography
+            rot = jitter_rotation(pitch_deg, roll_deg)
+            fb = cv2.warpPerspective(fb, jitter_homography(m.f, rot), (IMG_W, IMG_H), flags=cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_REPLICATE)
+            axes = rot @ axes
+        out = cv2.cvtColor(fb, cv2.COLOR_RGBA2RGB)
+        if light_intensity != 1.0:
+            lut, scale = self._gain_lut(light_intensity)
+            gain = cv2.cvtColor(cv2.LUT(fb[..., 3], lut), cv2.COLOR_GRAY2RGB)
+            out = cv2.multiply(out, gain, scale=scale)
+
+        # props, lit for the intensity and seen by the (jittered) camera, straight onto the RGB frame
+        pos = np.array([pose.x + c * m.forward - s * m.lateral, pose.y + s * m.forward + c * m.lateral, m.height])
+        self.props.draw(out, m, pos, axes, light_intensity)
+        return out
+
+    def render_all(self, pose: Pose, light_intensity: float = 1.0, pitch_deg: float = 0.0,
+                   roll_deg: float = 0.0) -> dict[str, np.ndarray]:
+        """Frames of all three cameras, keyed by camera name."""
+        return {name: self.render(pose, name, light_intensity, pitch_deg, roll_deg) for name in self.cameras}
+
+    def _gain_lut(self, intensity: float) -> tuple[np.ndarray, float]:
+        """uint8 table and scale of the brightness factor per direct-light share (alpha 0..255).
+
+        factor = 1 + (intensity - 1) * share: the ambient part stays, the direct part scales. Fixed point
+        keeps the multiply in uint8 (3x faster than float); the scale adapts so large factors still fit.
+        """
+        hit = self._lut_cache.get(intensity)
+        if hit is None:
+            if not math.isfinite(intensity) or intensity < 0:
+                raise ValueError(f"light intensity must be a finite number >= 0, got {intensity!r}")
+            factor = 1.0 + (intensity - 1.0) * np.arange(256) / 255.0
+            one = 128 if factor.max() < 1.99 else 255.0 / factor.max()
+            hit = (np.round(factor * one).astype(np.uint8), 1.0 / one)
+            if len(self._lut_cache) > 64:
+                self._lut_cache.clear()
+            self._lut_cache[intensity] = hit
+        return hit

@@ -1,0 +1,211 @@
+"""A renderable world: a track's lit ground texture (with mip levels), props, sun and sky.
+
+Building a world is split by what each part depends on, and each part is cached on exactly that:
+
+* ground albedo and prop placement depend on the track only (``Track.digest``);
+* shadows, the lit texture and its mips also depend on the sun (``light_direction_deg``) and cones;
+* light *intensity* depends on nothing here: every texel carries, in its alpha channel, the share of
+  its brightness that comes from direct sunlight, so the renderer rescales that share per frame.
+
+Light model (Unity-like): ``colour = albedo * (AMBIENT + intensity * direct(sun) * sun_visibility)``,
+with ``direct`` following Lambert's law for the flat ground.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from tools.sim.scenery import TKIND, TX, TY, Props, Sun, draw_shadows, place_props
+from tools.sim.sky import HAZE, make_panorama
+from tools.sim.texture import GroundAlbedo, paint_ground
+from tools.sim.track import Track
+
+log = logging.getLogger(__name__)
+
+AMBIENT = 0.42  # light from the sky, unaffected by light intensity and present in shadows
+DIRECT_AT_45 = 0.6  # direct sunlight on flat ground with the sun 45 degrees high, intensity 1
+MIN_SUN_ELEVATION = 2.0  # degrees; the sun is clamped here rather than set below the horizon
+SHADOW_DOWNSCALE = 2  # the shadow map has 2x coarser texels than the albedo (shadows are soft anyway)
+SHADOW_BLUR = 1.2  # penumbra, in shadow-map texels
+MIP_LEVELS = 7  # level L has texels 2**L times the base size
+ALBEDO_CACHE, PROPS_CACHE, WORLD_CACHE = 2, 4, 3  # LRU sizes (a lake world holds ~0.35 GB)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Vehicle body centre and heading: x east, y north (metres), yaw counter-clockwise from east (rad)."""
+
+    x: float
+    y: float
+    yaw: float
+
+
+def sun_for(track: Track, light_direction_deg: float = 0.0) -> Sun:
+    """The track's sun rotated about the light's local X axis by ``light_direction_deg``.
+
+    As in Unity, that axis is horizontal and perpendicular to the light's azimuth, so the rotation
+    raises (+) or lowers (-) the sun in its vertical plane; past the zenith it continues on the other side.
+    """
+    el = track.sun_elevation_deg + light_direction_deg
+    az = track.sun_azimuth_deg
+    if el > 90.0:
+        el, az = 180.0 - el, az + 180.0
+    return Sun(azimuth_deg=az % 360.0, elevation_deg=max(el, MIN_SUN_ELEVATION))
+
+
+def direct_light(sun: Sun) -> float:
+    """Direct sunlight on the flat ground at intensity 1 (Lambert: proportional to sin(elevation))."""
+    return DIRECT_AT_45 * math.sin(math.radians(sun.elevation_deg)) / math.sin(math.radians(45.0))
+
+
+@dataclass(frozen=True, eq=False)
+class LitGround:
+    """Lit RGBA ground texture pyramid; alpha = share of the texel's brightness that is direct sunlight."""
+
+    mips: tuple[np.ndarray, ...]
+    x0: float
+    y1: float
+    res: float
+    border: tuple[int, int, int, int]  # RGBA of the ground beyond the texture
+
+
+class World:
+    """Everything the renderer needs for one (track, light direction, cones) combination.
+
+    Use :func:`get_world` to share worlds (and their ~0.3 GB of textures) between renderers.
+    """
+
+    def __init__(self, track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None) -> None:
+        t0 = time.perf_counter()
+        self.track = track
+        self.light_direction_deg = float(light_direction_deg)
+        self.sun = sun_for(track, self.light_direction_deg)
+        self.ambient = AMBIENT
+        self.direct = direct_light(self.sun)
+        albedo = _albedo(track)
+        base = _base_props(track)
+        self.props: Props = replace(base, cones=_cone_array(cones))
+        self.haze = HAZE[track.scenery.theme]
+        shadow = _shadow_map(albedo, self.props, self.sun)
+        self.ground = light_ground(albedo, shadow, self.ambient, self.direct)
+        self.sun_visibility = _prop_visibility(self.props, shadow, albedo, self.sun)
+        self.panorama = make_panorama(track.scenery.theme, self.sun)
+        self.build_seconds = time.perf_counter() - t0
+        log.debug("world %s light %+.1f deg, %d cones: built in %.2f s", track.name, self.light_direction_deg,
+                  len(self.props.cones), self.build_seconds)
+
+    @property
+    def key(self) -> tuple:
+        return world_key(self.track, self.light_direction_deg, self.props.cones)
+
+    @property
+    def direct_share(self) -> float:
+        """Share of a sunlit surface's brightness that is direct light (scaled by light intensity)."""
+        return self.direct / (self.ambient + self.direct)
+
+
+# ---------------------------------------------------------------------------------------------- caching
+
+_albedo_cache: OrderedDict[str, GroundAlbedo] = OrderedDict()
+_props_cache: OrderedDict[str, Props] = OrderedDict()
+_world_cache: OrderedDict[tuple, World] = OrderedDict()
+
+
+def _lru(cache: OrderedDict, key, size: int, make):
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = make()
+    cache[key] = value
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
+def _albedo(track: Track) -> GroundAlbedo:
+    return _lru(_albedo_cache, track.digest, ALBEDO_CACHE, lambda: paint_ground(track))
+
+
+def _base_props(track: Track) -> Props:
+    return _lru(_props_cache, track.digest, PROPS_CACHE, lambda: place_props(track, _albedo(track)))
+
+
+def _cone_array(cones: np.ndarray | None) -> np.ndarray:
+    return np.zeros((0, 2)) if cones is None else np.ascontiguousarray(cones, dtype=np.float64).reshape(-1, 2)
+
+
+def world_key(track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None) -> tuple:
+    cone_hash = hashlib.sha1(_cone_array(cones).tobytes()).hexdigest()[:16]
+    return track.digest, round(float(light_direction_deg), 6), cone_hash
+
+
+def get_world(track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None) -> World:
+    """The cached :class:`World` for these inputs, built on first use (the last few are kept)."""
+    key = world_key(track, light_direction_deg, cones)
+    return _lru(_world_cache, key, WORLD_CACHE, lambda: World(track, light_direction_deg, cones))
+
+
+def clear_caches() -> None:
+    """Drop every cached albedo, prop set and world (frees their memory)."""
+    _albedo_cache.clear()
+    _props_cache.clear()
+    _world_cache.clear()
+
+
+# ---------------------------------------------------------------------------------------------- lighting
+
+
+def _shadow_map(albedo: GroundAlbedo, props: Props, sun: Sun) -> np.ndarray:
+    """Blurred shadow opacity (uint8, 255 = no direct sun) at SHADOW_DOWNSCALE x coarser texels."""
+    h, w = albedo.shape
+    res = albedo.res * SHADOW_DOWNSCALE
+    mask = draw_shadows(props, sun, (h // SHADOW_DOWNSCALE, w // SHADOW_DOWNSCALE), albedo.x0, albedo.y1, res)
+    return cv2.GaussianBlur(mask, (0, 0), SHADOW_BLUR)
+
+
+def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direct: float) -> LitGround:
+    """Multiply the albedo by the light map and stack the direct-light share as alpha; build mips."""
+    visible = 1.0 - shadow.astype(np.float32) / 255.0
+    light = ambient + direct * visible
+    share = direct * visible / light
+    h, w = albedo.shape
+    light8 = cv2.resize(np.clip(light * 128.0, 0, 255).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
+    share8 = cv2.resize(np.round(share * 255.0).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
+    lit = cv2.multiply(albedo.rgb, cv2.cvtColor(light8, cv2.COLOR_GRAY2RGB), scale=1.0 / 128.0)
+    rgba = cv2.cvtColor(lit, cv2.COLOR_RGB2RGBA)
+    cv2.mixChannels([share8], [rgba], [0, 3])
+    mips = [rgba]
+    for _ in range(MIP_LEVELS - 1):
+        mips.append(cv2.pyrDown(mips[-1]))
+    bright = ambient + direct
+    border = tuple(int(min(255, round(c * bright))) for c in albedo.mean_rgb) + (int(round(255 * direct / bright)),)
+    return LitGround(mips=tuple(mips), x0=albedo.x0, y1=albedo.y1, res=albedo.res, border=border)
+
+
+def _prop_visibility(props: Props, shadow: np.ndarray, albedo: GroundAlbedo, sun: Sun) -> dict[str, np.ndarray]:
+    """Sun visibility (0..1) of each prop, sampled from the shadow map just sunward of its base."""
+    res = albedo.res * SHADOW_DOWNSCALE
+    toward = sun.horizontal
+
+    def sample(xy: np.ndarray, clearance: np.ndarray | float) -> np.ndarray:
+        if len(xy) == 0:
+            return np.zeros(0)
+        p = xy + np.outer(np.broadcast_to(clearance, len(xy)), toward)
+        u = np.clip(((p[:, 0] - albedo.x0) / res).astype(np.int64), 0, shadow.shape[1] - 1)
+        v = np.clip(((albedo.y1 - p[:, 1]) / res).astype(np.int64), 0, shadow.shape[0] - 1)
+        return 1.0 - shadow[v, u].astype(np.float64) / 255.0
+
+    t = props.trees
+    return {
+        "trees": sample(t[:, [TX, TY]], np.where(t[:, TKIND] > 0, 1.0, 0.6) if len(t) else 0.0),
+        "poles": sample(props.poles[:, :2], 0.3),
+        "cones": sample(props.cones, 0.5),
+    }
