@@ -1,0 +1,220 @@
+"""The paper's six augmentations (section 3.1.4): label rules, random draws, and a literal reference.
+
+Order (footnote 4: it matters): perspective shift, shadows, brightness, flip, pan, tilt, each applied
+with its own probability (Table 5). The random parameters of a whole batch are drawn at once
+(``draw_params``) so the literal full-resolution reference here (``augment_reference``) and the fast
+batched path (``models.fastaug``) can be fed the very same draws and compared. ``shift`` is not in the
+paper: it is the horizontal viewpoint shift of the "nvidia" approach (off for the paper's behaviors).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from models import geometry
+
+FULL_W, FULL_H = 320, 160
+MAX_STEERING_DEG = 25.0
+CENTER, LEFT, RIGHT = 0, 1, 2
+CAMERAS = ("center", "left", "right")
+
+
+@dataclass(frozen=True)
+class AugmentSpec:
+    """Probabilities (Table 5) and ranges of the augmentations. Defaults: simplistic driving."""
+
+    perspective: float = 0.5  # left and right half each
+    shadow: float = 0.3
+    brightness: float = 0.4
+    flip: float = 0.5  # centre frames only
+    pan: float = 0.1
+    tilt: float = 0.05
+    shift: float = 0.0  # not in the paper (nvidia approach)
+    gamma: float = 0.95 / 10.0  # inter-camera distance / recovery distance (Eq. 4/5)
+    shadow_count: int = 4
+    shadow_darkness: float = 0.65
+    shadow_x: tuple[int, int] = (0, FULL_W)
+    shadow_y: tuple[int, int] = (FULL_H // 2, FULL_H)
+    brightness_range: float = 100.0
+    pan_range: float = 0.05  # fraction of width/height
+    tilt_range_deg: float = 1.0
+    shift_range_px: float = 0.0  # full-resolution pixels
+    shift_steering_per_px: float = 0.0
+
+    @property
+    def uses_side_cameras(self) -> bool:
+        return self.perspective > 0.0
+
+
+@dataclass
+class AugParams:
+    """Per-sample draws for a batch; ``steering`` is the corrected label."""
+
+    camera: np.ndarray  # int8: CENTER / LEFT / RIGHT
+    steering: np.ndarray  # float32, after perspective/flip/shift corrections
+    shadow: np.ndarray  # bool
+    shadow_xy: np.ndarray  # int32 (n, count, 4, 2): quadrilateral vertices, full-res pixels
+    brightness: np.ndarray  # bool
+    beta: np.ndarray  # float32
+    flip: np.ndarray  # bool (already restricted to centre frames)
+    pan: np.ndarray  # bool
+    pan_xy: np.ndarray  # float64 (n, 2): shift in full-res pixels
+    tilt: np.ndarray  # bool
+    tilt_deg: np.ndarray  # float64
+    shift: np.ndarray  # bool
+    shift_px: np.ndarray  # float64
+
+    def __len__(self) -> int:
+        return len(self.camera)
+
+    @property
+    def geometric(self) -> np.ndarray:
+        """Samples that need a warp beyond a mirror."""
+        return self.pan | self.tilt | self.shift
+
+
+def correction_angles(theta_rad: np.ndarray | float, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 4 and 5: correction angles (delta for the left camera, phi for the right), radians."""
+    t = np.tan(theta_rad)
+    delta = np.arctan(gamma / (1.0 + t * t + gamma * t))
+    phi = np.arctan(gamma / (1.0 + t * t - gamma * t))
+    return delta, phi
+
+
+def perspective_label(steering: np.ndarray | float, camera: np.ndarray | int, gamma: float) -> np.ndarray:
+    """Steering label of a side frame used as the centre frame (normalised, clamped to -1..1).
+
+    The left camera sees the road as if the car had drifted left, so the label steers right
+    (positive, as in the simulator): theta + delta (Eq. 4); the right camera: theta - phi (Eq. 5).
+    Both equal atan(tan(theta) +- gamma): aiming at the same point ``d`` metres ahead from ``x``
+    metres to the side.
+    """
+    s = np.asarray(steering, dtype=np.float64)
+    cam = np.asarray(camera)
+    theta = np.radians(s * MAX_STEERING_DEG)
+    delta, phi = correction_angles(theta, gamma)
+    out = np.where(cam == LEFT, theta + delta, np.where(cam == RIGHT, theta - phi, theta))
+    return np.clip(np.degrees(out) / MAX_STEERING_DEG, -1.0, 1.0)
+
+
+def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, rng: np.random.Generator,
+                ) -> AugParams:
+    """Draw every augmentation decision of a batch (Table 5 probabilities), in the paper's order.
+
+    All arrays are drawn whether used or not, so a batch consumes the generator identically.
+    """
+    n = len(steering)
+    steering = np.asarray(steering, dtype=np.float64)
+    u = rng.random(n)
+    sides = np.asarray(has_sides, dtype=bool)
+    camera = np.where(sides & (u < spec.perspective / 2), LEFT,
+                      np.where(sides & (u < spec.perspective), RIGHT, CENTER)).astype(np.int8)
+    label = perspective_label(steering, camera, spec.gamma)
+
+    shadow = rng.random(n) < spec.shadow
+    xs = rng.integers(spec.shadow_x[0], spec.shadow_x[1], size=(n, spec.shadow_count, 4), endpoint=True)
+    ys = rng.integers(spec.shadow_y[0], spec.shadow_y[1], size=(n, spec.shadow_count, 4), endpoint=True)
+    shadow_xy = np.stack([xs, ys], axis=-1).astype(np.int32)
+
+    brightness = rng.random(n) < spec.brightness
+    beta = np.where(brightness, rng.uniform(-spec.brightness_range, spec.brightness_range, n), 0.0)
+
+    flip = (rng.random(n) < spec.flip) & (camera == CENTER)
+    label = np.where(flip, -label, label) + 0.0  # no -0.0 labels
+
+    pan = rng.random(n) < spec.pan
+    pan_xy = rng.uniform(-spec.pan_range, spec.pan_range, (n, 2)) * np.array([FULL_W, FULL_H])
+
+    tilt = rng.random(n) < spec.tilt
+    tilt_deg = rng.uniform(-spec.tilt_range_deg, spec.tilt_range_deg, n)
+
+    shift = rng.random(n) < spec.shift
+    shift_px = rng.uniform(-spec.shift_range_px, spec.shift_range_px, n)
+    label = np.clip(np.where(shift, label + shift_px * spec.shift_steering_per_px, label), -1.0, 1.0)
+
+    return AugParams(camera=camera, steering=label.astype(np.float32), shadow=shadow, shadow_xy=shadow_xy,
+                     brightness=brightness, beta=beta.astype(np.float32), flip=flip, pan=pan,
+                     pan_xy=np.where(pan[:, None], pan_xy, 0.0), tilt=tilt, tilt_deg=np.where(tilt, tilt_deg, 0.0),
+                     shift=shift, shift_px=np.where(shift, shift_px, 0.0))
+
+
+# ---- the literal reference, one full-resolution RGB frame at a time (paper section 3.1.4) ----
+
+def shadows(rgb: np.ndarray, quads: np.ndarray, darkness: float) -> np.ndarray:
+    """Darken the union of the quadrilaterals (full-res pixel vertices) by ``darkness``."""
+    mask = np.zeros(rgb.shape[:2], np.uint8)
+    for quad in quads:
+        cv2.fillPoly(mask, [np.asarray(quad, np.int32).reshape(-1, 1, 2)], 1)
+    out = rgb.astype(np.float32)
+    out[mask.astype(bool)] *= darkness
+    return np.rint(out).astype(np.uint8)
+
+
+def brightness(rgb: np.ndarray, beta: float) -> np.ndarray:
+    """Eq. 6: add ``beta`` to every pixel and clamp to 0..255."""
+    return np.rint(np.clip(rgb.astype(np.float32) + np.float32(beta), 0, 255)).astype(np.uint8)
+
+
+def flip(rgb: np.ndarray, steering: float) -> tuple[np.ndarray, float]:
+    """Eq. 7 and 8: mirror horizontally, negate the label."""
+    return np.ascontiguousarray(rgb[:, ::-1]), -steering
+
+
+def pan(rgb: np.ndarray, tx: float, ty: float) -> np.ndarray:
+    """Eq. 9: shift by (tx, ty) pixels, crop the null area, resize back."""
+    h, w = rgb.shape[:2]
+    m = np.array([[1.0, 0.0, tx], [0.0, 1.0, ty]])
+    shifted = cv2.warpAffine(rgb, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    x0, y0, cw, ch = geometry.pan_crop(w, h, tx, ty)
+    return cv2.resize(shifted[y0:y0 + ch, x0:x0 + cw], (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def tilt(rgb: np.ndarray, degrees: float) -> np.ndarray:
+    """Eq. 10 and 11: rotate about the centre, crop the largest central rectangle, resize back."""
+    h, w = rgb.shape[:2]
+    rotated = cv2.warpAffine(rgb, geometry.rotation_matrix(w, h, degrees), (w, h), flags=cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_CONSTANT)
+    x0, y0, cw, ch = geometry.tilt_crop(w, h, degrees)
+    return cv2.resize(rotated[y0:y0 + ch, x0:x0 + cw], (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def shift(rgb: np.ndarray, tx: float) -> np.ndarray:
+    """Horizontal viewpoint shift (nvidia approach): translate, edge pixels repeated."""
+    h, w = rgb.shape[:2]
+    m = np.array([[1.0, 0.0, tx], [0.0, 1.0, 0.0]])
+    return cv2.warpAffine(rgb, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def augment_reference(frames: dict[str, np.ndarray], params: AugParams, i: int,
+                      spec: AugmentSpec) -> tuple[np.ndarray, float]:
+    """Sample ``i`` of ``params`` applied literally, step by step, to full-resolution RGB frames.
+
+    Slow and simple on purpose: the executable statement of the paper that the fast path is tested
+    against. Returns the augmented full-resolution frame and the label.
+    """
+    img = frames[CAMERAS[int(params.camera[i])]]
+    if params.shadow[i]:
+        img = shadows(img, params.shadow_xy[i], spec.shadow_darkness)
+    if params.brightness[i]:
+        img = brightness(img, float(params.beta[i]))
+    if params.flip[i]:
+        img, _ = flip(img, 0.0)
+    if params.pan[i]:
+        img = pan(img, float(params.pan_xy[i, 0]), float(params.pan_xy[i, 1]))
+    if params.shift[i]:
+        img = shift(img, float(params.shift_px[i]))
+    if params.tilt[i]:
+        img = tilt(img, float(params.tilt_deg[i]))
+    return img, float(params.steering[i])
+
+
+def no_augmentation(n: int, steering: np.ndarray) -> AugParams:
+    """Parameters that leave frames untouched (validation, previews of the raw data)."""
+    z = np.zeros(n, dtype=bool)
+    return AugParams(camera=np.zeros(n, np.int8), steering=np.asarray(steering, np.float32), shadow=z,
+                     shadow_xy=np.zeros((n, 0, 4, 2), np.int32), brightness=z, beta=np.zeros(n, np.float32),
+                     flip=z, pan=z, pan_xy=np.zeros((n, 2)), tilt=z, tilt_deg=np.zeros(n), shift=z,
+                     shift_px=np.zeros(n))

@@ -1,0 +1,70 @@
+"""Per-behavior and per-approach settings: every number of the paper's Tables 4, 5 and 6 in one place."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import StrEnum
+
+from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
+from models.augment import AugmentSpec
+
+
+class Behavior(StrEnum):
+    SIMPLISTIC = "simplistic"
+    RIGOROUS = "rigorous"
+    COLLISION = "collision"
+
+
+class Approach(StrEnum):
+    OURS = "ours"  # the paper's pipeline: balancing + six augmentations
+    NVIDIA = "nvidia"  # NVIDIA's: crop, YUV, no balancing, light augmentation
+
+
+class Arch(StrEnum):
+    SHALLOW = "shallow"
+    PILOTNET = "pilotnet"
+
+
+@dataclass(frozen=True)
+class BehaviorSpec:
+    deletion_rate: float  # Table 4, lambda of Eq. 3
+    epochs: int  # Table 6
+    augment: AugmentSpec  # Table 5
+
+
+BEHAVIORS: dict[Behavior, BehaviorSpec] = {
+    Behavior.SIMPLISTIC: BehaviorSpec(0.7, 5, AugmentSpec(perspective=0.5, flip=0.5)),
+    Behavior.RIGOROUS: BehaviorSpec(0.8, 10, AugmentSpec(perspective=0.5, flip=0.0)),  # flipping changes lanes
+    Behavior.COLLISION: BehaviorSpec(0.8, 5, AugmentSpec(perspective=0.0, flip=0.5)),  # one camera
+}
+
+#: NVIDIA's approach (Table 10, left column): no side cameras, no shadows/pan/tilt; random flip, a
+#: horizontal viewpoint shift of up to 25 px with 0.004 steering per pixel, and milder brightness.
+NVIDIA_AUGMENT = AugmentSpec(perspective=0.0, shadow=0.0, brightness=0.4, flip=0.5, pan=0.0, tilt=0.0, shift=0.5,
+                             brightness_range=50.0, shift_range_px=25.0, shift_steering_per_px=0.004)
+
+BATCH_SIZE = 256
+LEARNING_RATE = 1e-3
+AUGMENTATION_LOOPS = 64
+
+
+@dataclass(frozen=True)
+class Pipeline:
+    """What a (behavior, arch, approach) triple trains with."""
+
+    contract: PreprocessContract
+    augment: AugmentSpec
+    deletion_rate: float
+    epochs: int
+
+
+def pipeline_for(behavior: Behavior | str, arch: Arch | str, approach: Approach | str) -> Pipeline:
+    """The paper's pipeline ("ours"; 200x66 for PilotNet) or NVIDIA's, for one behavior."""
+    spec = BEHAVIORS[Behavior(behavior)]
+    arch, approach = Arch(arch), Approach(approach)
+    if approach is Approach.NVIDIA:
+        augment = NVIDIA_AUGMENT if spec.augment.flip else replace(NVIDIA_AUGMENT, flip=0.0)
+        contract = NVIDIA_CONTRACT if arch is Arch.PILOTNET else replace(NVIDIA_CONTRACT, width=64, height=64)
+        return Pipeline(contract, augment, 0.0, spec.epochs)
+    contract = PAPER_CONTRACT if arch is Arch.SHALLOW else replace(PAPER_CONTRACT, width=200, height=66)
+    return Pipeline(contract, spec.augment, spec.deletion_rate, spec.epochs)

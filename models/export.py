@@ -1,0 +1,80 @@
+"""Export a trained network to ONNX with its preprocessing contract, and prove the export is faithful.
+
+The contract goes into the model's metadata (``rbc.preprocess``) so the drive server preprocesses
+exactly as training did. ONNX Runtime's outputs are compared with PyTorch's on real frames; a
+mismatch fails the run loudly instead of shipping a model that drives differently than it validated.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import torch
+from torch import nn
+
+from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
+from drive_server.preprocess import to_input_tensor
+from models import runfiles
+from models.nets import ContractInput
+
+log = logging.getLogger(__name__)
+
+INPUT_NAME = "image"
+OUTPUT_NAME = "steering"
+OPSET = 17
+TOLERANCE = 1e-4
+
+
+class ExportError(RuntimeError):
+    """The ONNX model does not reproduce the PyTorch model."""
+
+
+def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, Any], path: Path,
+                frames: np.ndarray) -> float:
+    """Write ``path`` (atomically) and return the max |ORT - torch| on ``frames`` (uint8 network images)."""
+    model = ContractInput(net, contract.layout).eval()
+    dummy = torch.zeros(contract.input_shape, dtype=torch.float32)
+    path = Path(path)
+    with runfiles.atomic_path(path) as tmp:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the TorchScript exporter is deprecated but needs no onnxscript
+            torch.onnx.export(model, (dummy,), str(tmp), dynamo=False, opset_version=OPSET,
+                              input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
+                              dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}})
+        proto = onnx.load(str(tmp))
+        meta = {p.key: p.value for p in proto.metadata_props}
+        meta[METADATA_KEY] = contract.to_json()
+        meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
+        del proto.metadata_props[:]
+        for k, v in meta.items():
+            proto.metadata_props.add(key=k, value=v)
+        proto.producer_name = "robust-behavioral-cloning"
+        onnx.checker.check_model(proto)
+        onnx.save(proto, str(tmp))
+        diff = verify_onnx(tmp, model, contract, frames)
+    log.info("exported %s (max |onnxruntime - torch| = %.2e on %d frames)", path, diff, len(frames))
+    return diff
+
+
+def verify_onnx(path: Path, model: nn.Module, contract: PreprocessContract, frames: np.ndarray) -> float:
+    """Compare ONNX Runtime with PyTorch on real frames; raise ``ExportError`` beyond ``TOLERANCE``."""
+    x = to_input_tensor(frames, contract)
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    got_contract = PreprocessContract.from_json(session.get_modelmeta().custom_metadata_map[METADATA_KEY])
+    if got_contract != contract:
+        raise ExportError(f"{path}: contract in metadata {got_contract} != {contract}")
+    ort_out = np.concatenate([session.run(None, {INPUT_NAME: x[i:i + 1]})[0] for i in range(len(x))])
+    ort_batch = session.run(None, {INPUT_NAME: x})[0]
+    with torch.no_grad():
+        ref = model.eval()(torch.from_numpy(x)).numpy()
+    diff = float(max(np.abs(ort_out - ref).max(), np.abs(ort_batch - ref).max()))
+    if not np.isfinite(diff) or diff >= TOLERANCE:
+        raise ExportError(f"{path}: ONNX Runtime differs from PyTorch by {diff:.3g} (tolerance {TOLERANCE})")
+    return diff

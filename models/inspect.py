@@ -1,0 +1,227 @@
+"""``rbc inspect RUN_DIR``: the paper's analysis pictures of a training run, in ``RUN_DIR/inspect/``.
+
+* ``steering_histograms.png``: training labels as recorded, after one balanced pass (Table 4), and
+  after balancing + augmentation (what the network is actually fitted to);
+* ``loss.png``: training and validation MSE per epoch;
+* ``predictions.png``: the exported model's steering against the recorded labels over about one lap
+  of consecutive frames (Fig. 13), through the deployment path (ONNX Runtime, shared preprocessing);
+* ``activations.png``: input and the activation maps of every convolution layer (Fig. 12), plus a
+  VisualBackProp mask (Bojarski et al. 2017) showing which input pixels drive the deepest layer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from models import runfiles
+
+LAP_FRAMES = 1200  # about one lap of the lake track at the simulator's recording rate
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="directory written by rbc train")
+    parser.add_argument("--data", action="append", metavar="DIR",
+                        help="recordings (default: those of the run; the split shown is then of these)")
+    parser.add_argument("--frames", type=int, default=LAP_FRAMES, help="consecutive frames for the prediction plot")
+    parser.add_argument("--samples", type=int, default=4, help="frames shown with their activation maps")
+
+
+def run(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import torch
+
+    from models.behavior import pipeline_for
+    from models.nets import build_model
+    from models.train import TrainConfig
+    from models.trainingdata import prepare_data
+
+    run_dir: Path = args.run_dir
+    record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
+    config = TrainConfig.from_dict(record["config"])
+    pipeline = pipeline_for(config.behavior, config.arch, config.approach)
+    data = prepare_data(args.data or config.data, pipeline, config.seed, config.val_fraction)
+    out = run_dir / "inspect"
+    out.mkdir(parents=True, exist_ok=True)
+    written = [_histograms(out, data, pipeline, config.seed)]
+    if (run_dir / runfiles.HISTORY).exists():
+        written.append(_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY)))
+    model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
+    checkpoint = run_dir / runfiles.CHECKPOINT
+    if checkpoint.exists():
+        model.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["model"])
+    model.eval()
+    path, mse = _predictions(out, data, pipeline, model, run_dir / runfiles.MODEL, args.frames)
+    written.append(path)
+    written.append(_activations(out, data, pipeline, model, args.samples, config.seed))
+    for p in written:
+        print(p)
+    print(f"prediction MSE over the plotted frames: {mse:.5f}")
+    return 0
+
+
+def _histograms(out: Path, data, pipeline, seed: int) -> Path:
+    import matplotlib.pyplot as plt
+
+    from models.augment import draw_params
+    from models.balance import balanced_pass
+
+    rng = np.random.default_rng(seed)
+    steering = data.steering[data.train]
+    sides = data.has_sides[data.train]
+    kept = balanced_pass(steering, pipeline.deletion_rate, rng)
+    augmented = draw_params(steering[kept], sides[kept], pipeline.augment, rng).steering
+    bins = np.linspace(-1, 1, 52)
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.4), sharex=True)
+    for ax, values, title in zip(axes, (steering, steering[kept], augmented),
+                                 ("recorded (training split)", f"one balanced pass (lambda {pipeline.deletion_rate})",
+                                  "balanced + augmented"), strict=True):
+        ax.hist(values, bins=bins, color="tab:blue")
+        zeros = int((values == 0).sum())
+        ax.set_title(f"{title}\n{len(values)} samples, {zeros} exactly zero", fontsize=9)
+        ax.set_xlabel("normalised steering")
+    axes[0].set_ylabel("samples")
+    fig.tight_layout()
+    path = out / "steering_histograms.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _loss(out: Path, history: list[dict[str, float]]) -> Path:
+    import matplotlib.pyplot as plt
+
+    epochs = [h["epoch"] for h in history]
+    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    ax.plot(epochs, [h["train_loss"] for h in history], "o-", label="training (augmented)")
+    ax.plot(epochs, [h["val_loss"] for h in history], "s-", label="validation")
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("MSE")
+    ax.set_xticks(epochs)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = out / "loss.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: int) -> tuple[Path, float]:
+    import matplotlib.pyplot as plt
+    import torch
+
+    from drive_server.preprocess import to_input_tensor
+
+    first_log = data.dataset.samples[0].log
+    positions = [i for i in data.usable if data.dataset.samples[i].log == first_log][:frames]
+    images = data.cache.frames[0, positions]
+    truth = data.steering[positions]
+    if onnx_path.exists():
+        import onnxruntime as ort
+
+        session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+        name = session.get_inputs()[0].name
+        x = to_input_tensor(images, pipeline.contract)
+        pred = np.concatenate([session.run(None, {name: x[i:i + 256]})[0] for i in range(0, len(x), 256)]).ravel()
+        source = "model.onnx (ONNX Runtime)"
+    else:
+        from models.fastaug import training_contract
+
+        x = to_input_tensor(images, training_contract(pipeline.contract))
+        with torch.no_grad():
+            pred = model(torch.from_numpy(x)).numpy().ravel()
+        source = "checkpoint (PyTorch)"
+    mse = float(np.mean((pred - truth) ** 2))
+    is_val = np.isin(positions, data.val)
+    fig, ax = plt.subplots(figsize=(12, 3.6))
+    t = np.arange(len(positions))
+    ax.plot(t, truth, color="0.5", lw=1.0, label="recorded (manual)")
+    ax.plot(t, pred, color="tab:red", lw=1.2, label=f"predicted, {source}")
+    ax.scatter(t[is_val], truth[is_val], s=4, color="tab:blue", label="validation frames", zorder=3)
+    ax.set_ylim(-1.05, 1.05)
+    ax.set_xlabel(f"frame (log order, {first_log.name})")
+    ax.set_ylabel("normalised steering")
+    ax.set_title(f"prediction analysis over {len(positions)} consecutive frames: MSE {mse:.4f}", fontsize=10)
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = out / "predictions.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path, mse
+
+
+def visual_backprop(activations: list) -> np.ndarray:
+    """VisualBackProp mask at the first layer's input size: channel means multiplied from deep to shallow."""
+    import torch
+    import torch.nn.functional as F
+
+    mask = None
+    for act in reversed(activations):
+        mean = act.mean(dim=1, keepdim=True)
+        mask = mean if mask is None else mean * F.interpolate(mask, size=mean.shape[-2:], mode="bilinear",
+                                                               align_corners=False)
+    assert mask is not None
+    return torch.nan_to_num(mask)[0, 0].numpy()
+
+
+def _channel_mosaic(act: np.ndarray) -> np.ndarray:
+    """All channel maps (C, h, w) of one layer tiled into one image, normalised per layer."""
+    c, h, w = act.shape
+    cols = int(np.ceil(np.sqrt(c * w / max(h, 1) * 0.5))) if h > 1 else int(np.ceil(np.sqrt(c)))
+    cols = max(1, min(c, cols))
+    rows = int(np.ceil(c / cols))
+    pad = 1 if h > 1 else 0
+    mosaic = np.full((rows * (h + pad), cols * (w + pad)), np.nan, np.float32)
+    peak = float(act.max()) or 1.0
+    for k in range(c):
+        r, q = divmod(k, cols)
+        mosaic[r * (h + pad):r * (h + pad) + h, q * (w + pad):q * (w + pad) + w] = act[k] / peak
+    return mosaic
+
+
+def _activations(out: Path, data, pipeline, model, count: int, seed: int) -> Path:
+    import cv2
+    import matplotlib.pyplot as plt
+    import torch
+
+    from drive_server.preprocess import to_input_tensor
+    from models.fastaug import training_contract
+    from models.nets import conv_activations
+
+    rng = np.random.default_rng(seed)
+    pool = data.train[data.steering[data.train] != 0] if (data.steering[data.train] != 0).any() else data.train
+    picks = np.sort(rng.choice(pool, size=min(count, len(pool)), replace=False))
+    images = data.cache.frames[0, picks]
+    with torch.no_grad():
+        acts = conv_activations(model, torch.from_numpy(to_input_tensor(images, training_contract(pipeline.contract))))
+    layers = len(acts)
+    fig, axes = plt.subplots(len(picks), layers + 2, figsize=(2.6 * (layers + 2), 2.4 * len(picks)), squeeze=False)
+    for row, img in enumerate(images):
+        shown = cv2.cvtColor(img, cv2.COLOR_YUV2RGB) if pipeline.contract.color == "yuv" else img
+        axes[row, 0].imshow(shown)
+        axes[row, 0].set_title(f"input, steering {data.steering[picks[row]]:+.3f}", fontsize=8)
+        for k, act in enumerate(acts):
+            a = act[row].numpy()
+            axes[row, k + 1].imshow(_channel_mosaic(a), cmap="inferno", interpolation="nearest")
+            axes[row, k + 1].set_title(f"conv{k + 1}: {a.shape[0]} x {a.shape[1]}x{a.shape[2]}", fontsize=8)
+        vbp = visual_backprop([a[row:row + 1] for a in acts])
+        vbp = cv2.resize(vbp, (img.shape[1], img.shape[0]), interpolation=cv2.INTER_LINEAR)
+        vbp = vbp / (vbp.max() or 1.0)
+        axes[row, -1].imshow(shown)
+        axes[row, -1].imshow(vbp, cmap="inferno", alpha=0.6)
+        axes[row, -1].set_title("VisualBackProp mask", fontsize=8)
+        for ax in axes[row]:
+            ax.axis("off")
+    fig.tight_layout()
+    path = out / "activations.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,98 @@
+"""``rbc augment-preview``: a grid of augmented frames with their labels, to see what training sees.
+
+Each sample is shown twice: the literal full-resolution augmentation (``augment_reference``, as in
+the paper's Figures 3-9) and the network input the fast training path makes from the same draws.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from models.augment import CAMERAS, AugParams, augment_reference, draw_params
+from models.behavior import Approach, Arch, Behavior, pipeline_for
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--data", action="append", required=True, metavar="DIR", help="recording directory or log")
+    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default="simplistic")
+    parser.add_argument("--arch", choices=[a.value for a in Arch], default="shallow")
+    parser.add_argument("--approach", choices=[a.value for a in Approach], default="ours")
+    parser.add_argument("--out", required=True, type=Path, help="PNG file to write")
+    parser.add_argument("--n", type=int, default=16, help="number of samples")
+    parser.add_argument("--seed", type=int, default=0)
+
+
+def describe(params: AugParams, i: int) -> str:
+    """Short text of what was applied to sample ``i``."""
+    parts = []
+    if params.camera[i]:
+        parts.append(CAMERAS[int(params.camera[i])])
+    if params.shadow[i]:
+        parts.append("shadow")
+    if params.brightness[i]:
+        parts.append(f"bright{params.beta[i]:+.0f}")
+    if params.flip[i]:
+        parts.append("flip")
+    if params.pan[i]:
+        parts.append(f"pan({params.pan_xy[i, 0]:+.0f},{params.pan_xy[i, 1]:+.0f})")
+    if params.shift[i]:
+        parts.append(f"shift{params.shift_px[i]:+.0f}")
+    if params.tilt[i]:
+        parts.append(f"tilt{params.tilt_deg[i]:+.2f}°")
+    return " ".join(parts) or "none"
+
+
+def run(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import cv2
+    import matplotlib.pyplot as plt
+
+    from models.datalog import read_logs
+    from models.fastaug import FastAugmenter
+    from models.framecache import build_cache, load_frame
+
+    pipeline = pipeline_for(args.behavior, args.arch, args.approach)
+    dataset = read_logs(args.data)
+    rng = np.random.default_rng(args.seed)
+    # prefer turning frames so the label corrections are visible, as the paper's figures do
+    samples = dataset.samples
+    steering = np.array([s.steering for s in samples], np.float32)
+    weights = np.where(steering != 0, 3.0, 1.0)
+    pick = np.sort(rng.choice(len(samples), size=min(args.n, len(samples)), replace=False, p=weights / weights.sum()))
+    chosen = [samples[i] for i in pick]
+    cams = CAMERAS if pipeline.augment.uses_side_cameras else ("center",)
+    cache = build_cache(chosen, pipeline.contract, cams)
+    sides = np.array([s.has_sides for s in chosen]) & pipeline.augment.uses_side_cameras
+    params = draw_params(steering[pick], sides, pipeline.augment, rng)
+    fast = FastAugmenter(cache, pipeline.augment).images(np.arange(len(chosen)), params)
+
+    cols = 4
+    rows = int(np.ceil(len(chosen) / cols))
+    fig, axes = plt.subplots(rows, cols * 2, figsize=(cols * 2 * 2.6, rows * 1.75), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for k, s in enumerate(chosen):
+        frames = {c: load_frame(getattr(s, c)) for c in cams if getattr(s, c) is not None}
+        full, label = augment_reference(frames, params, k, pipeline.augment)
+        net = fast[k]
+        if pipeline.contract.color == "yuv":
+            net = cv2.cvtColor(net, cv2.COLOR_YUV2RGB)
+        r, c = divmod(k, cols)
+        a_full, a_net = axes[r, 2 * c], axes[r, 2 * c + 1]
+        a_full.imshow(full)
+        a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{describe(params, k)}", fontsize=6.5)
+        a_net.imshow(net, interpolation="nearest")
+        a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=6.5)
+    fig.suptitle(f"{args.behavior} / {args.approach}: recorded label -> training label "
+                 f"(left: full-resolution reference, right: training input)", fontsize=9)
+    fig.tight_layout()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=110)
+    plt.close(fig)
+    print(f"wrote {args.out} ({len(chosen)} samples from {', '.join(str(p) for p in dataset.logs)})")
+    return 0

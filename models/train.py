@@ -1,0 +1,314 @@
+"""Training: balance, augment, fit (Adam 1e-3, MSE, batch 256), validate, checkpoint, export to ONNX.
+
+A run directory holds ``config.json`` (everything needed to reproduce the run), ``history.csv``,
+``checkpoint.pt`` and finally ``model.onnx``. Ctrl-C finishes the current step, saves a checkpoint
+and returns; ``resume=True`` continues from it with the stored configuration, batch for batch.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import signal
+import threading
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import torch
+from torch import nn
+
+from drive_server.preprocess import to_input_tensor
+from models import runfiles
+from models.batches import Prefetcher, TrainingSet, epoch_batches
+from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipeline, pipeline_for
+from models.export import export_onnx
+from models.fastaug import FastAugmenter, training_contract
+from models.nets import build_model, count_parameters
+from models.trainingdata import PreparedData, prepare_data
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_EVERY_S = 120.0
+EXPORT_FRAMES = 32
+
+
+class RunDirError(RuntimeError):
+    """The run directory is in a state that does not fit the request (exists, or nothing to resume)."""
+
+
+@dataclass
+class TrainConfig:
+    """Everything that determines a run. ``None`` means the paper's value for the behavior."""
+
+    data: list[str]
+    out: str
+    behavior: str = "simplistic"
+    arch: str = "shallow"
+    approach: str = "ours"
+    epochs: int | None = None
+    aug_loops: int = AUGMENTATION_LOOPS
+    batch_size: int = BATCH_SIZE
+    learning_rate: float = LEARNING_RATE
+    seed: int = 0
+    max_steps_per_epoch: int | None = None
+    val_fraction: float = 0.2
+    # execution only (do not change results beyond float noise)
+    threads: int | None = None
+    decode_workers: int | None = None
+    progress: bool = True
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        known = set(cls.__dataclass_fields__)
+        return cls(**{k: v for k, v in data.items() if k in known})
+
+
+@dataclass
+class RunResult:
+    run_dir: Path
+    history: list[dict[str, float]]
+    onnx: Path | None
+    val_loss: float | None
+    export_diff: float | None
+    interrupted: bool = False
+    samples_per_s: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class _State:
+    epoch: int = 0
+    step: int = 0
+    loss_sum: float = 0.0
+    loss_count: int = 0
+    epoch_seconds: float = 0.0
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+def steps_per_epoch(n_train: int, batch_size: int, loops: int) -> int:
+    """Paper footnote 10: ceil(n / m) * chi."""
+    return math.ceil(n_train / batch_size) * loops
+
+
+def validation_steps(n_val: int, batch_size: int) -> int:
+    """Paper footnote 11: ceil(n / m)."""
+    return math.ceil(n_val / batch_size)
+
+
+def default_threads(arch: str = "shallow") -> int:
+    """The shallow CNN trains about as fast as one core makes batches: leave that core to the batch
+    thread. PilotNet is ~40x heavier per sample and its batches take ~3 % of a core: use every core."""
+    cores = os.cpu_count() or 2
+    return cores if arch == "pilotnet" else max(1, cores - 1)
+
+
+def train(config: TrainConfig, resume: bool = False) -> RunResult:
+    run_dir = Path(config.out)
+    config = _resolve_config(config, run_dir, resume)
+    pipeline = pipeline_for(config.behavior, config.arch, config.approach)
+    epochs = config.epochs or pipeline.epochs
+    torch.set_num_threads(config.threads or default_threads(config.arch))
+    cv2.setNumThreads(1)
+    torch.manual_seed(config.seed)
+
+    data = _prepare(config, pipeline)
+    n_train, n_val = len(data.train), len(data.val)
+    steps = steps_per_epoch(n_train, config.batch_size, config.aug_loops)
+    if config.max_steps_per_epoch:
+        steps = min(steps, config.max_steps_per_epoch)
+    model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+    state = _State()
+    checkpoint = run_dir / runfiles.CHECKPOINT
+    if resume and checkpoint.exists():
+        state = _load_checkpoint(checkpoint, model, optimizer)
+        log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
+    else:
+        runfiles.write_json(run_dir / runfiles.CONFIG, _config_record(config, pipeline, data, epochs, steps))
+
+    augmenter = FastAugmenter(data.cache, pipeline.augment)
+    tset = TrainingSet(data.train, data.steering[data.train], data.has_sides[data.train], pipeline.deletion_rate,
+                       config.batch_size)
+    log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
+             config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,
+             count_parameters(model))
+    trained = 0
+    wall = time.perf_counter()
+    with _StopFlag() as stop:
+        while state.epoch < epochs:
+            done = _train_epoch(model, optimizer, augmenter, tset, config, state, steps, stop, checkpoint)
+            trained += done
+            if stop.requested and state.step < steps:
+                log.warning("interrupted at epoch %d step %d: checkpoint saved; continue with --resume",
+                            state.epoch + 1, state.step)
+                return RunResult(run_dir, state.history, None, None, None, interrupted=True,
+                                 samples_per_s=trained * config.batch_size / (time.perf_counter() - wall))
+            val_loss = evaluate(model, data, pipeline, config.batch_size)
+            state.history.append({"epoch": state.epoch + 1, "train_loss": state.loss_sum / max(1, state.loss_count),
+                                  "val_loss": val_loss, "seconds": round(state.epoch_seconds, 2)})
+            log.info("epoch %d/%d: train MSE %.5f, val MSE %.5f, %.0f s", state.epoch + 1, epochs,
+                     state.history[-1]["train_loss"], val_loss, state.epoch_seconds)
+            state = replace(state, epoch=state.epoch + 1, step=0, loss_sum=0.0, loss_count=0, epoch_seconds=0.0)
+            runfiles.write_history(run_dir / runfiles.HISTORY, state.history)
+            _save_checkpoint(checkpoint, model, optimizer, state, config)
+            if stop.requested and state.epoch < epochs:
+                log.warning("interrupted after epoch %d: checkpoint saved; continue with --resume", state.epoch)
+                return RunResult(run_dir, state.history, None, None, None, interrupted=True)
+    rate = trained * config.batch_size / max(1e-9, time.perf_counter() - wall)
+    return _finish(model, data, pipeline, config, state, run_dir, rate)
+
+
+def evaluate(model: nn.Module, data: PreparedData, pipeline: Pipeline, batch_size: int) -> float:
+    """Validation MSE over every validation sample (centre frames, no augmentation)."""
+    model.eval()
+    contract = training_contract(pipeline.contract)
+    total, count = 0.0, 0
+    with torch.no_grad():
+        for start in range(0, len(data.val), batch_size):
+            idx = data.val[start:start + batch_size]
+            x = torch.from_numpy(to_input_tensor(data.cache.frames[0, idx], contract))
+            y = torch.from_numpy(data.steering[idx]).reshape(-1, 1)
+            total += float(nn.functional.mse_loss(model(x), y, reduction="sum"))
+            count += len(idx)
+    return total / max(1, count)
+
+
+def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: FastAugmenter, tset: TrainingSet,
+                 config: TrainConfig, state: _State, steps: int, stop: _StopFlag, checkpoint: Path) -> int:
+    """Train from ``state.step`` to the end of the epoch (or a Ctrl-C); returns the steps done."""
+    from tqdm import tqdm
+
+    if state.step == 0:
+        torch.manual_seed(config.seed * 1009 + state.epoch)
+    model.train()
+    loss_fn = nn.MSELoss()
+    source = Prefetcher(epoch_batches(augmenter, tset, config.seed, state.epoch, state.step, steps))
+    bar = tqdm(total=steps, initial=state.step, desc=f"epoch {state.epoch + 1}", unit="step", leave=False,
+               disable=not config.progress, dynamic_ncols=True)
+    started = time.perf_counter() - state.epoch_seconds
+    last_save = time.perf_counter()
+    done = 0
+    try:
+        for step, x, y in source:
+            optimizer.zero_grad(set_to_none=True)
+            loss = loss_fn(model(torch.from_numpy(x)), torch.from_numpy(y))
+            loss.backward()
+            optimizer.step()
+            state.loss_sum += loss.item()
+            state.loss_count += 1
+            state.step = step + 1
+            done += 1
+            if state.step % 20 == 0:
+                bar.set_postfix(mse=f"{state.loss_sum / state.loss_count:.4f}", refresh=False)
+            bar.update(1)
+            if stop.requested or time.perf_counter() - last_save > CHECKPOINT_EVERY_S:
+                state.epoch_seconds = time.perf_counter() - started
+                _save_checkpoint(checkpoint, model, optimizer, state, config)
+                last_save = time.perf_counter()
+                if stop.requested:
+                    break
+    finally:
+        source.close()
+        bar.close()
+    state.epoch_seconds = time.perf_counter() - started
+    return done
+
+
+def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: TrainConfig, state: _State,
+            run_dir: Path, rate: float) -> RunResult:
+    val_loss = state.history[-1]["val_loss"] if state.history else float("nan")
+    info = {"arch": config.arch, "behavior": config.behavior, "approach": config.approach, "val_mse": val_loss,
+            "epochs": len(state.history), "train_samples": int(len(data.train)), "seed": config.seed,
+            "parameters": count_parameters(model), "code_version": runfiles.code_version()}
+    frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
+    path = run_dir / runfiles.MODEL
+    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames)
+    return RunResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate, info=info)
+
+
+def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
+    from tqdm import tqdm
+
+    workers = config.decode_workers or max(1, os.cpu_count() or 1)
+    with tqdm(desc="decoding frames", unit="sample", disable=not config.progress, leave=False) as bar:
+        return prepare_data(config.data, pipeline, config.seed, config.val_fraction, workers, bar.update)
+
+
+def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool) -> TrainConfig:
+    stored_path = run_dir / runfiles.CONFIG
+    if resume:
+        if not stored_path.exists():
+            raise RunDirError(f"{run_dir}: nothing to resume (no {runfiles.CONFIG})")
+        stored = TrainConfig.from_dict(json.loads(stored_path.read_text(encoding="utf-8"))["config"])
+        return replace(stored, out=str(run_dir), threads=config.threads, decode_workers=config.decode_workers,
+                       progress=config.progress)
+    if (run_dir / runfiles.CHECKPOINT).exists() or (run_dir / runfiles.MODEL).exists():
+        raise RunDirError(f"{run_dir} already holds a run: pass --resume to continue it, or choose another --out")
+    if not config.data:
+        raise RunDirError("no --data given")
+    return replace(config, data=[str(Path(d).resolve()) for d in config.data])
+
+
+def _config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, epochs: int,
+                   steps: int) -> dict[str, Any]:
+    return {
+        "config": asdict(config),
+        "resolved": {
+            "epochs": epochs, "steps_per_epoch": steps,
+            "validation_steps": validation_steps(len(data.val), config.batch_size),
+            "deletion_rate": pipeline.deletion_rate, "optimizer": "Adam", "loss": "MSE",
+            "train_samples": int(len(data.train)), "val_samples": int(len(data.val)),
+            "zero_steer_train_samples": int((data.steering[data.train] == 0).sum()),
+        },
+        "augment": asdict(pipeline.augment),
+        "contract": asdict(pipeline.contract),
+        "logs": [{"path": str(r.log), "rows": r.rows, "samples": r.used, "skipped": len(r.skipped)}
+                 for r in data.dataset.reports],
+        "unreadable_frames": len(data.cache.errors),
+        "code_version": runfiles.code_version(),
+        "torch": torch.__version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def _save_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer, state: _State,
+                     config: TrainConfig) -> None:
+    payload = {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "state": asdict(state),
+               "torch_rng": torch.get_rng_state(), "config": asdict(config)}
+    runfiles.write_bytes(path, lambda tmp: torch.save(payload, tmp))
+
+
+def _load_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer) -> _State:
+    payload = torch.load(path, map_location="cpu", weights_only=False)
+    model.load_state_dict(payload["model"])
+    optimizer.load_state_dict(payload["optimizer"])
+    torch.set_rng_state(payload["torch_rng"])
+    return _State(**payload["state"])
+
+
+class _StopFlag:
+    """First Ctrl-C asks the loop to stop after the current step; a second one aborts at once."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        log.warning("Ctrl-C: finishing the current step and saving a checkpoint (Ctrl-C again to abort)")
+
+    def __enter__(self) -> _StopFlag:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)

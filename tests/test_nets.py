@@ -1,0 +1,52 @@
+"""The two networks: exact parameter counts, initialisation, layouts."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from models.nets import ContractInput, PilotNet, ShallowCNN, build_model, conv_activations, count_parameters  # noqa: E402
+
+
+def test_parameter_counts_match_the_papers() -> None:
+    assert count_parameters(ShallowCNN()) == 14065
+    assert count_parameters(PilotNet()) == 252219
+    assert count_parameters(build_model("shallow", 64, 64)) == 14065
+    assert count_parameters(build_model("pilotnet", 66, 200)) == 252219
+
+
+def test_shallow_cnn_layers_and_shapes() -> None:
+    net = ShallowCNN().eval()
+    acts = conv_activations(net, torch.zeros(2, 3, 64, 64))
+    assert [tuple(a.shape[1:]) for a in acts] == [(8, 11, 11), (16, 4, 4), (32, 1, 1)]
+    assert net(torch.zeros(5, 3, 64, 64)).shape == (5, 1)
+    dropouts = [m.p for m in net.modules() if isinstance(m, torch.nn.Dropout)]
+    assert dropouts == [0.25, 0.25, 0.25]
+    assert len(conv_activations(PilotNet(), torch.zeros(1, 3, 66, 200))) == 5
+
+
+def test_glorot_uniform_weights_and_zero_biases() -> None:
+    torch.manual_seed(0)
+    for net in (ShallowCNN(), PilotNet()):
+        for m in net.modules():
+            if isinstance(m, torch.nn.Conv2d | torch.nn.Linear):
+                fan_in = m.weight[0].numel()
+                fan_out = m.weight.shape[0] * m.weight[0, 0].numel()
+                bound = math.sqrt(6 / (fan_in + fan_out))
+                assert float(m.weight.detach().abs().max()) <= bound + 1e-6
+                assert float(m.weight.detach().abs().max()) > 0.5 * bound
+                assert float(m.bias.detach().abs().max()) == 0.0
+
+
+def test_contract_input_takes_nhwc_and_matches_nchw() -> None:
+    torch.manual_seed(1)
+    net = ShallowCNN().eval()
+    x = torch.rand(3, 64, 64, 3) - 0.5
+    with torch.no_grad():
+        a = ContractInput(net, "nhwc")(x)
+        b = net(x.permute(0, 3, 1, 2).contiguous())
+        c = ContractInput(net, "nchw")(x.permute(0, 3, 1, 2))
+    assert torch.equal(a, b) and torch.equal(b, c)

@@ -1,0 +1,162 @@
+"""End to end on real frames: train a few steps, export, load the ONNX model as the drive server does."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+ort = pytest.importorskip("onnxruntime")
+
+from drive_server.contract import (  # noqa: E402
+    METADATA_KEY,
+    METADATA_MODEL_INFO_KEY,
+    NVIDIA_CONTRACT,
+    PAPER_CONTRACT,
+    PreprocessContract,
+)
+from drive_server.preprocess import preprocess, to_input_tensor  # noqa: E402
+from models import train as train_mod  # noqa: E402
+from models.datalog import read_log  # noqa: E402
+from models.framecache import build_cache, load_frame  # noqa: E402
+from models.nets import ContractInput, build_model  # noqa: E402
+from models.train import RunDirError, TrainConfig, steps_per_epoch, train  # noqa: E402
+
+SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
+pytestmark = pytest.mark.slow
+
+
+def _config(out: Path, **kw) -> TrainConfig:
+    base = dict(data=[str(SAMPLE)], out=str(out), epochs=1, max_steps_per_epoch=3, threads=1, decode_workers=1,
+                progress=False, seed=11)
+    return TrainConfig(**{**base, **kw})
+
+
+def test_paper_step_counts() -> None:
+    assert steps_per_epoch(9680, 256, 64) == 2432
+    assert train_mod.validation_steps(2421, 256) == 10
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory):
+    out = tmp_path_factory.mktemp("run") / "shallow"
+    return train(_config(out, epochs=2))
+
+
+def test_run_directory_contents(run) -> None:
+    d = run.run_dir
+    assert sorted(p.name for p in d.iterdir()) == ["checkpoint.pt", "config.json", "history.csv", "model.onnx"]
+    record = json.loads((d / "config.json").read_text())
+    assert record["config"]["seed"] == 11 and record["config"]["batch_size"] == 256
+    assert record["config"]["learning_rate"] == 1e-3 and record["config"]["aug_loops"] == 64
+    assert record["resolved"]["deletion_rate"] == 0.7 and record["resolved"]["train_samples"] == 28
+    assert record["resolved"]["val_samples"] == 8 and record["resolved"]["steps_per_epoch"] == 3
+    assert record["logs"] == [{"path": str((SAMPLE / "driving_log.csv").resolve()), "rows": 36, "samples": 36,
+                               "skipped": 0}]
+    assert record["augment"]["perspective"] == 0.5 and record["contract"]["width"] == 64
+    assert record["code_version"]
+    rows = list(csv.DictReader((d / "history.csv").open()))
+    assert [r["epoch"] for r in rows] == ["1", "2"] and set(rows[0]) == {"epoch", "train_loss", "val_loss", "seconds"}
+    assert run.val_loss == pytest.approx(float(rows[-1]["val_loss"]))
+    assert not list(d.glob(".*.tmp"))
+
+
+def test_onnx_export_carries_the_contract_and_matches_pytorch(run) -> None:
+    session = ort.InferenceSession(str(run.onnx), providers=["CPUExecutionProvider"])
+    meta = session.get_modelmeta().custom_metadata_map
+    assert PreprocessContract.from_json(meta[METADATA_KEY]) == PAPER_CONTRACT
+    info = json.loads(meta[METADATA_MODEL_INFO_KEY])
+    assert (info["arch"], info["behavior"], info["approach"]) == ("shallow", "simplistic", "ours")
+    assert info["val_mse"] == pytest.approx(run.val_loss) and info["parameters"] == 14065
+    inp = session.get_inputs()[0]
+    assert inp.type == "tensor(float)" and list(inp.shape[1:]) == [64, 64, 3] and not isinstance(inp.shape[0], int)
+    # real frames through the shared preprocessing; PyTorch from the checkpoint
+    samples, _ = read_log(SAMPLE)
+    images = build_cache(samples, PAPER_CONTRACT, ("center",), workers=1).frames[0]
+    x = to_input_tensor(images, PAPER_CONTRACT)
+    net = build_model("shallow", 64, 64)
+    net.load_state_dict(torch.load(run.run_dir / "checkpoint.pt", weights_only=False)["model"])
+    with torch.no_grad():
+        expected = ContractInput(net, "nhwc").eval()(torch.from_numpy(x)).numpy()
+    got = session.run(None, {inp.name: x})[0]
+    assert got.shape == (36, 1)
+    assert np.abs(got - expected).max() < 1e-4
+    assert run.export_diff < 1e-4
+
+
+def test_drive_server_loads_the_exported_model(run) -> None:
+    model_mod = pytest.importorskip("drive_server.model")
+    pipeline_mod = pytest.importorskip("drive_server.pipeline")
+    if not hasattr(model_mod, "SteeringModel") or not hasattr(pipeline_mod, "DrivePipeline"):
+        pytest.skip("drive server pipeline API not available")
+    model = model_mod.SteeringModel(run.onnx)
+    assert model.contract == PAPER_CONTRACT
+    pipeline = pipeline_mod.DrivePipeline(model)
+    samples, _ = read_log(SAMPLE)
+    session = ort.InferenceSession(str(run.onnx), providers=["CPUExecutionProvider"])
+    for s in samples[:3]:
+        rgb = load_frame(s.center, pipeline.reduce)
+        direct = float(session.run(None, {session.get_inputs()[0].name: preprocess(rgb, PAPER_CONTRACT)})[0][0, 0])
+        assert pipeline.steer(rgb) == pytest.approx(max(-1.0, min(1.0, direct)), abs=1e-6)
+
+
+def test_existing_run_is_not_overwritten(run) -> None:
+    with pytest.raises(RunDirError, match="--resume"):
+        train(_config(run.run_dir))
+
+
+class _StopAfter:
+    """Stands in for Ctrl-C: asks the loop to stop after ``n`` training steps."""
+
+    n = 2
+
+    def __init__(self) -> None:
+        self.checks = 0
+
+    @property
+    def requested(self) -> bool:
+        self.checks += 1
+        return self.checks > self.n
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+def test_interrupt_then_resume_reproduces_an_uninterrupted_run(tmp_path: Path, monkeypatch) -> None:
+    straight = train(_config(tmp_path / "a", epochs=2, max_steps_per_epoch=4))
+    with monkeypatch.context() as m:
+        m.setattr(train_mod, "_StopFlag", _StopAfter)
+        stopped = train(_config(tmp_path / "b", epochs=2, max_steps_per_epoch=4))
+    assert stopped.interrupted and stopped.onnx is None
+    assert (tmp_path / "b" / "checkpoint.pt").exists() and not (tmp_path / "b" / "model.onnx").exists()
+    resumed = train(TrainConfig(data=[], out=str(tmp_path / "b"), threads=1, progress=False), resume=True)
+    assert not resumed.interrupted and resumed.onnx is not None
+    losses = [v for h in straight.history for v in (h["train_loss"], h["val_loss"])]
+    assert [v for h in resumed.history for v in (h["train_loss"], h["val_loss"])] == pytest.approx(losses, rel=1e-6)
+
+
+def test_nothing_to_resume(tmp_path: Path) -> None:
+    with pytest.raises(RunDirError, match="nothing to resume"):
+        train(_config(tmp_path / "none"), resume=True)
+
+
+def test_cli_pilotnet_nvidia_approach(tmp_path: Path) -> None:
+    from tools.cli import main
+
+    out = tmp_path / "pilotnet"
+    rc = main(["train", "--data", str(SAMPLE), "--arch", "pilotnet", "--approach", "nvidia", "--out", str(out),
+               "--epochs", "1", "--max-steps-per-epoch", "1", "--threads", "1", "--no-progress"])
+    assert rc == 0
+    session = ort.InferenceSession(str(out / "model.onnx"), providers=["CPUExecutionProvider"])
+    meta = session.get_modelmeta().custom_metadata_map
+    assert PreprocessContract.from_json(meta[METADATA_KEY]) == NVIDIA_CONTRACT
+    assert json.loads(meta[METADATA_MODEL_INFO_KEY])["parameters"] == 252219
+    assert list(session.get_inputs()[0].shape[1:]) == [66, 200, 3]
+    assert json.loads((out / "config.json").read_text())["resolved"]["deletion_rate"] == 0.0
