@@ -37,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sheet", type=Path, default=Path("out/sim_sheet.png"),
                         help="contact sheet of sample frames (default out/sim_sheet.png)")
     parser.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
+    parser.add_argument("--no-lap", action="store_true", help="skip the closed-loop lap over the socket")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -133,12 +134,45 @@ def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None
 
 
 def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
-    """Hook for the session benchmark (a full autopilot lap: physics, rules and rendering).
+    """Closed loop over the socket: one lock-step lap of lake against a real drive_server, on ONE core.
 
-    The session module owns laps; until it provides a benchmark this returns None and only the
-    renderer is measured.
+    This process and the server it starts are pinned to the same CPU (children inherit the
+    affinity), so the figure is what a single core sustains: render, JPEG, Unity wire, decode,
+    inference, control and physics. Uses the bundled simplistic model (random weights if absent).
     """
-    return None
+    if args.no_lap or not any(t.name == "lake" for t in tracks):
+        return None
+    import os
+    import tempfile
+
+    from drive_server.models_dir import default_model_path
+    from tools.server_process import ServerProcess
+    from tools.sim.drivers import SocketDriver
+    from tools.sim.session import ScenarioConfig, run_scenario
+
+    with tempfile.TemporaryDirectory(prefix="rbc_simbench_") as tmp:
+        model = default_model_path()
+        if not model.is_file():
+            from tools.onnx_builders import save_model
+
+            model = save_model("shallow", Path(tmp) / "shallow.onnx")
+        can_pin = hasattr(os, "sched_setaffinity")
+        before = os.sched_getaffinity(0) if can_pin else None
+        if can_pin:
+            os.sched_setaffinity(0, {min(before)})
+        try:
+            with ServerProcess(model, ["--log-every", "0"]) as server, SocketDriver(server.url) as driver:
+                result = run_scenario(ScenarioConfig(track="lake", speed_limit_kmh=25.0), driver)
+        finally:
+            if can_pin:
+                os.sched_setaffinity(0, before)
+    lap = result.laps[0] if result.laps else None
+    per_frame = result.wall_time_s / max(1, result.frames)
+    frames_25 = result.track_length_m / (25 / 3.6) * result.config.control_hz  # a lap at a steady 25 km/h
+    return (f"closed-loop lap over the socket ({model.name}, {'one core' if can_pin else 'unpinned'}): "
+            f"{result.wall_time_s:.1f} s wall for {result.sim_time_s:.0f} s simulated, {result.frames} frames "
+            f"({per_frame * 1e3:.2f} ms/frame), eta {lap.eta if lap else 0:.1f} %; "
+            f"a 1 km lap at 25 km/h ({frames_25:.0f} frames) projects to {frames_25 * per_frame:.1f} s wall")
 
 
 # ---------------------------------------------------------------------------------------------- sheet
