@@ -67,7 +67,7 @@ def test_steering_is_limited_in_angle_and_rate():
 
 
 def test_full_throttle_reaches_but_never_exceeds_the_top_speed():
-    params = VehicleParams()
+    params = VehicleParams(top_speed_kmh=30.19 * KMH_PER_MPH)  # the stock Udacity car
     car = _car(params=params)
     speeds = []
     for _ in range(90 * params.physics_hz):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import statistics
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -31,6 +32,10 @@ class SuiteConfig:
     track: str | None = None  # override the behavior's track (e.g. a short test track)
     map_dir: str | None = None
     overrides: dict[str, Any] = field(default_factory=dict)  # extra ScenarioConfig fields
+
+
+class SearchStopped(Exception):
+    """Raised inside a range search once the evaluation is being interrupted."""
 
 
 def base_scenario(cfg: SuiteConfig) -> dict[str, Any]:
@@ -96,19 +101,28 @@ def run_suite(cfg: SuiteConfig, runner: Runner, workers: int) -> dict[str, Any]:
         exp, side, origin, step, cap = item
 
         def evaluate(values):
+            if stop.is_set():
+                raise SearchStopped
             fs = [runner.submit(_task(exp, v, cfg, cfg.base_seed)) for v in values]
             return [f.result()["autonomous"] for f in fs]
 
         return exp.key, side, step_outward(evaluate, origin, step, cap, batch=1)
 
     range_results: dict[str, dict[str, SearchResult]] = {}
+    stop = threading.Event()
     if searches:
         if not base_ok and any(s[0].measure == "range" for s in searches):
             log.warning("the no-variation run is not autonomous: ranges around it are empty")
         runnable = [s for s in searches if s[0].measure == "max" or base_ok]
-        with ThreadPoolExecutor(max_workers=max(1, min(len(runnable) or 1, max(2, workers * 2)))) as pool:
+        pool = ThreadPoolExecutor(max_workers=max(1, min(len(runnable) or 1, max(2, workers * 2))))
+        try:
             for key, side, res in pool.map(search, runnable):
                 range_results.setdefault(key, {})[side] = res
+        except BaseException:  # Ctrl-C: stop every search at its next step, start nothing new
+            stop.set()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
     for exp in chosen:
         if exp.measure not in ("range", "max"):
             continue
