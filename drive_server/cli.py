@@ -1,0 +1,123 @@
+"""``drive_server``: serve an ONNX steering model to the simulator (Unity or headless) on port 4567.
+
+The model is loaded and checked BEFORE the server listens, so a bad file ends the command at once
+with exit code 2 and one line saying what is wrong, instead of a simulator that never moves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from pathlib import Path
+
+import cv2
+
+from drive_server.guard import FallbackPolicy
+from drive_server.model import InferenceConfig, ModelError, SteeringModel
+from drive_server.models_dir import default_model_path
+from drive_server.pipeline import DriveConfig
+from protocol import SpeedUnit
+
+log = logging.getLogger("drive_server")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="drive_server", description=__doc__.splitlines()[0].split(": ", 1)[1])
+    p.add_argument("--model", type=Path, default=None,
+                   help="ONNX model (default: the bundled models/pretrained/simplistic.onnx)")
+    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default: localhost only)")
+    p.add_argument("--port", type=int, default=4567, help="port (default 4567, the simulator's; 0 = any free)")
+    p.add_argument("--speed-limit", type=float, default=25.0, help="v_l of Eq. 14 in km/h (default 25)")
+    p.add_argument("--steer-limit", type=float, default=25.0,
+                   help="steering limit in degrees: scales the model's -1..1 output and is delta of Eq. 14")
+    p.add_argument("--tau", type=float, default=1.0, help="tau of Eq. 14, in [0, 1] (default 1)")
+    p.add_argument("--telemetry-speed-unit", choices=[u.value for u in SpeedUnit], default=SpeedUnit.MPH.value,
+                   help="unit of the telemetry speed: mph (stock Udacity simulator, default) or kmh (paper's)")
+    p.add_argument("--threads", type=int, default=1, help="ONNX Runtime intra-op threads (default 1)")
+    p.add_argument("--provider", default="CPUExecutionProvider", help="ONNX Runtime execution provider")
+    p.add_argument("--stats-json", type=Path, default=None, help="write latency statistics here at exit")
+    p.add_argument("--log-every", type=float, default=10.0,
+                   help="seconds between one-line latency summaries (0: only at exit)")
+    p.add_argument("--hold-frames", type=int, default=3,
+                   help="malformed frames answered with the last good command before a controlled stop")
+    p.add_argument("--workers", type=int, default=1,
+                   help="server processes sharing the port (several simulators at once; WebSocket transport "
+                        "only when > 1; POSIX only). Default 1")
+    p.add_argument("--ping-interval", type=float, default=25.0, help="seconds between the server's pings (default 25)")
+    p.add_argument("--stock-transport", action="store_true",
+                   help="disable the WebSocket transport tuning (for comparison benchmarks)")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+
+    def fail(message: str) -> int:
+        print(f"drive_server: error: {message}", file=sys.stderr)
+        return 2
+
+    try:
+        drive = DriveConfig(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit, tau=args.tau,
+                            speed_unit=SpeedUnit(args.telemetry_speed_unit))
+        drive.control_law()
+        inference = InferenceConfig(threads=args.threads, provider=args.provider)
+        fallback = FallbackPolicy(hold_frames=args.hold_frames)
+        if args.workers < 1 or (args.workers > 1 and not hasattr(os, "fork")):
+            raise ValueError(f"--workers must be >= 1 (and 1 where fork is unavailable), got {args.workers}")
+        if args.ping_interval < 1:
+            raise ValueError(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
+    except ValueError as exc:
+        return fail(str(exc))
+    model_path = args.model
+    if model_path is None:
+        model_path = default_model_path()
+        if not model_path.is_file():
+            return fail(f"no --model given and the bundled model {model_path} does not exist "
+                        "(train one with `rbc train` or pass --model PATH)")
+    try:
+        model = SteeringModel(model_path, inference)
+        model.warm_up()
+    except ModelError as exc:
+        return fail(str(exc))
+
+    # one frame at a time: OpenCV's worker threads only add wake-up latency to a 160x80 resize
+    cv2.setNumThreads(1)
+    # imported only now: the model check above must not pay for (or print anything from) eventlet
+    from drive_server.pipeline import DrivePipeline
+    from drive_server.server import DriveServer, ServerConfig
+    from drive_server.transport import TransportTuning
+
+    tuning = TransportTuning.stock() if args.stock_transport else TransportTuning()
+    config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
+                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval)
+    log.info("model %s", model.describe())
+    log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s",
+             drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value)
+    if args.workers > 1:
+        from drive_server.workers import listening_socket, serve_workers
+
+        try:
+            sock = listening_socket(args.host, args.port)
+        except OSError as exc:
+            return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
+
+        def make_server(worker_config: ServerConfig) -> DriveServer:  # runs in each worker, after the fork
+            return DriveServer(DrivePipeline(SteeringModel(model_path, inference), drive), worker_config)
+
+        return serve_workers(args.workers, sock, model, config, make_server, tuning)
+    server = DriveServer(DrivePipeline(model, drive), config)
+    try:
+        server.bind()
+    except OSError as exc:
+        return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
+    server.serve()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

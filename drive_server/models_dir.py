@@ -1,0 +1,23 @@
+"""Where the bundled models live, found the same way in a source checkout and in an installed wheel."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+PRETRAINED_PACKAGE = "models.pretrained"
+DEFAULT_MODEL_NAME = "simplistic.onnx"
+
+
+def default_model_path() -> Path:
+    """Path of the bundled simplistic model (it may not exist yet: the caller checks)."""
+    return Path(str(resources.files(PRETRAINED_PACKAGE) / DEFAULT_MODEL_NAME))
+
+BEHAVIORS = ("simplistic", "rigorous", "collision")
+
+
+def bundled_model_path(behavior: str = "simplistic") -> Path:
+    """Path of the bundled model of a driving behavior (simplistic, rigorous or collision)."""
+    if behavior not in BEHAVIORS:
+        raise ValueError(f"unknown behavior {behavior!r}; bundled models: {', '.join(BEHAVIORS)}")
+    return Path(str(resources.files(PRETRAINED_PACKAGE) / f"{behavior}.onnx"))

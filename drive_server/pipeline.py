@@ -1,0 +1,79 @@
+"""One telemetry frame to one steer command: decode, preprocess, infer, control, with stage timings.
+
+Independent of the socket so the same code serves the simulator, benchmarks and in-process runs.
+Preprocessing is whatever the model's contract says, through THE shared ``preprocess`` function.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from time import perf_counter
+
+import numpy as np
+
+from drive_server.control import ControlLaw
+from drive_server.model import SteeringModel
+from drive_server.preprocess import jpeg_reduction, preprocess
+from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
+
+
+class InferenceError(RuntimeError):
+    """The model produced something that is not a usable steering value."""
+
+
+@dataclass(frozen=True)
+class DriveConfig:
+    """Control-law parameters and the unit of the telemetry speed (mph: the stock simulator)."""
+
+    speed_limit_kmh: float = 25.0
+    steer_limit_deg: float = 25.0
+    tau: float = 1.0
+    speed_unit: SpeedUnit = SpeedUnit.MPH
+
+    def control_law(self) -> ControlLaw:
+        return ControlLaw(speed_limit_kmh=self.speed_limit_kmh, steer_limit_deg=self.steer_limit_deg, tau=self.tau)
+
+
+class DrivePipeline:
+    """Stateless per frame (per-client state lives in the server): safe to share between clients."""
+
+    def __init__(self, model: SteeringModel, config: DriveConfig = DriveConfig()) -> None:
+        self.model = model
+        self.config = config
+        self.law = config.control_law()
+        self.contract = model.contract
+        self.reduce = jpeg_reduction(model.contract)
+
+    def steer(self, rgb: np.ndarray) -> float:
+        """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``)."""
+        value = self.model.predict(preprocess(rgb, self.contract))
+        if not math.isfinite(value):
+            raise InferenceError(f"model output is not finite: {value!r}")
+        return max(-1.0, min(1.0, value))
+
+    def control(self, steering: float, speed: float) -> SteerCommand:
+        """Eq. 14 on the predicted steering (converted to degrees) and the telemetry speed."""
+        throttle = self.law.command(steering * self.config.steer_limit_deg, to_kmh(speed, self.config.speed_unit))
+        return SteerCommand(steering=steering, throttle=throttle)
+
+    def run(self, telemetry: Telemetry) -> tuple[SteerCommand, tuple[float, float, float, float]]:
+        """Command for one parsed frame and the durations (s) of decode, preprocess, inference, control.
+
+        Raises ``ProtocolError`` for an unusable image and ``InferenceError`` for an unusable output.
+        """
+        t0 = perf_counter()
+        rgb = decode_image(telemetry.image_b64, reduce=self.reduce)
+        t1 = perf_counter()
+        x = preprocess(rgb, self.contract)
+        t2 = perf_counter()
+        value = self.model.predict(x)
+        t3 = perf_counter()
+        if not math.isfinite(value):
+            raise InferenceError(f"model output is not finite: {value!r}")
+        command = self.control(max(-1.0, min(1.0, value)), telemetry.speed)
+        t4 = perf_counter()
+        return command, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)
+
+
+__all__ = ["DriveConfig", "DrivePipeline", "InferenceError", "ProtocolError"]

@@ -1,0 +1,138 @@
+"""Per-client latency statistics of the serving pipeline, cheap enough to record on every frame.
+
+Stage durations go into a numpy ring that grows to at most the last 65,536 frames (1.3 MB), so
+recording costs a row assignment and memory stays bounded however long the simulator drives;
+percentiles are computed only when a summary is asked for, over all retained frames or over the
+frames since a given one (the periodic log line, so it stays cheap and describes recent latency).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Pipeline stages, in order; ``total`` is handler entry to reply queued.
+STAGES = ("decode", "preprocess", "inference", "control", "total")
+RING_CAPACITY = 1 << 16
+_INITIAL_ROWS = 1024
+
+
+class LatencyStats:
+    """Stage timings (seconds) and frame counters of one client."""
+
+    def __init__(self, name: str = "", capacity: int = RING_CAPACITY) -> None:
+        self.name = name
+        self.frames = 0  # frames answered with the model's command
+        self.manual = 0  # null (manual mode) frames
+        self.malformed = 0  # frames answered by the fallback policy
+        self.capacity = capacity
+        self.recorded = 0  # frames whose timings went into the ring (``frames`` may also count others)
+        self._ring = np.zeros((min(capacity, _INITIAL_ROWS), len(STAGES)), np.float32)
+
+    def record(self, timings: tuple[float, float, float, float, float]) -> None:
+        if self.recorded == len(self._ring) < self.capacity:  # grow until the ring is full size
+            self._ring = np.concatenate([self._ring, np.zeros_like(self._ring[: self.capacity - len(self._ring)])])
+        self._ring[self.recorded % len(self._ring)] = timings
+        self.recorded += 1
+        self.frames += 1
+
+    def samples(self, since: int = 0) -> np.ndarray:
+        """Timings of the retained frames numbered ``since`` and later, oldest first; shape (n, len(STAGES))."""
+        start = max(since, self.recorded - len(self._ring), 0)
+        if start >= self.recorded:
+            return self._ring[:0]
+        idx = np.arange(start, self.recorded) % len(self._ring)
+        return self._ring[idx]
+
+    def summary(self) -> dict[str, Any]:
+        return summarize([self])
+
+    @classmethod
+    def from_samples(cls, name: str, samples: np.ndarray, frames: int, manual: int, malformed: int) -> LatencyStats:
+        """Rebuild statistics from saved samples (how a worker process hands its statistics back)."""
+        stats = cls(name, capacity=max(1, len(samples)))
+        stats._ring = np.asarray(samples, np.float32).reshape(-1, len(STAGES))
+        stats.recorded = len(stats._ring)
+        stats.frames, stats.manual, stats.malformed = frames, manual, malformed
+        return stats
+
+
+def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
+    """Save counters and retained samples of several clients to one ``.npz`` (atomically)."""
+    path = Path(path)
+    arrays: dict[str, np.ndarray] = {}
+    meta = []
+    for i, s in enumerate(stats):
+        arrays[f"s{i}"] = s.samples()
+        meta.append({"name": s.name, "frames": s.frames, "manual": s.manual, "malformed": s.malformed})
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def load_stats(path: Path) -> list[LatencyStats]:
+    """The statistics saved by ``save_stats``."""
+    with np.load(Path(path)) as data:
+        meta = json.loads(data["meta"].tobytes().decode())
+        return [LatencyStats.from_samples(m["name"], data[f"s{i}"], m["frames"], m["manual"], m["malformed"])
+                for i, m in enumerate(meta)]
+
+
+def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None) -> dict[str, Any]:
+    """Counters and per-stage percentiles (milliseconds) over one or several clients.
+
+    ``since`` maps a client's name to the first frame to include in the percentiles (counters are
+    always totals).
+    """
+    stats = list(stats)
+    since = since or {}
+    samples = [s.samples(since.get(s.name, 0)) for s in stats]
+    timings = np.concatenate(samples).astype(np.float64) if samples else np.zeros((0, len(STAGES)))
+    out: dict[str, Any] = {
+        "frames": sum(s.frames for s in stats),
+        "manual": sum(s.manual for s in stats),
+        "malformed": sum(s.malformed for s in stats),
+        "sampled": len(timings),
+        "stages_ms": {},
+    }
+    if len(timings):
+        pct = np.percentile(timings, [50, 90, 99], axis=0) * 1e3
+        for i, stage in enumerate(STAGES):
+            out["stages_ms"][stage] = {
+                "p50": round(float(pct[0, i]), 4), "p90": round(float(pct[1, i]), 4),
+                "p99": round(float(pct[2, i]), 4), "mean": round(float(timings[:, i].mean() * 1e3), 4),
+                "max": round(float(timings[:, i].max() * 1e3), 4),
+            }
+    return out
+
+
+def summary_line(summary: dict[str, Any]) -> str:
+    """One log line: counters, then p50/p99 in ms per stage."""
+    head = f"frames {summary['frames']} manual {summary['manual']} malformed {summary['malformed']}"
+    stages = summary["stages_ms"]
+    if not stages:
+        return head
+    return head + " | p50/p99 ms " + " ".join(
+        f"{name} {stages[name]['p50']:.3f}/{stages[name]['p99']:.3f}" for name in STAGES)
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON next to ``path`` then rename over it, so a reader never sees half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2, sort_keys=True)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

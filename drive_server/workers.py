@@ -1,0 +1,134 @@
+"""``--workers N``: N server processes sharing one listening socket, for several simulators at once.
+
+Why: an eventlet server runs on one core, and each frame costs it ~0.75 ms of CPU (JPEG decode and
+inference ~0.45 ms, python-socketio/engine.io/eventlet ~0.25 ms), so one process tops out near
+1,300 telemetry/s however many simulators are connected. A native thread pool does not help (the work
+is interleaved with Python that needs the GIL); separate processes do. The parent opens the socket,
+forks the workers (each loads its own ONNX Runtime session after the fork), and the kernel hands each
+new connection to one of them. A connection lives in one worker, so per-client state is unchanged.
+
+Limitation: Engine.IO long-polling needs every request of a session to reach the same process, so
+workers accept the WebSocket transport only: the Unity simulator (WebSocket only anyway) and modern
+clients configured with ``transports=["websocket"]``. One worker (the default) serves every client.
+POSIX only (fork).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import socket
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from drive_server.model import SteeringModel
+from drive_server.server import DriveServer, ServerConfig, stats_document
+from drive_server.stats import load_stats, summarize, summary_line, write_json_atomic
+from drive_server.transport import TransportTuning
+
+log = logging.getLogger(__name__)
+
+
+def listening_socket(host: str, port: int, backlog: int = 128) -> socket.socket:
+    """A plain listening TCP socket to share with forked workers (raises ``OSError`` if taken)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+        sock.listen(backlog)
+    except OSError:
+        sock.close()
+        raise
+    return sock
+
+
+def _run_worker(index: int, sock: socket.socket, make_server: Callable[[ServerConfig], DriveServer],
+                config: ServerConfig) -> int:
+    """Body of one forked worker: serve until SIGTERM, then hand the statistics back."""
+    for handler in logging.getLogger().handlers:
+        fmt = handler.formatter._fmt if handler.formatter else "%(message)s"  # type: ignore[union-attr]
+        handler.setFormatter(logging.Formatter(fmt.replace("%(name)s", f"%(name)s[w{index}]"), "%H:%M:%S"))
+    server = make_server(config)
+    server.adopt(sock)
+    server.serve(announce=False)
+    return 0
+
+
+def serve_workers(workers: int, sock: socket.socket, model: SteeringModel, config: ServerConfig,
+                  make_server: Callable[[ServerConfig], DriveServer], transport: TransportTuning) -> int:
+    """Fork ``workers`` servers on ``sock`` and supervise them; returns the exit code for the CLI.
+
+    SIGINT/SIGTERM stop the workers; their statistics are merged into ``config.stats_json``. If a worker
+    dies on its own, the others are stopped too (exit code 1): a half-served port is worse than none.
+    """
+    host, port = sock.getsockname()[:2]
+    tmp = tempfile.TemporaryDirectory(prefix="drive_server_workers_")
+    pids: dict[int, int] = {}
+    for i in range(workers):
+        worker_config = replace(config, transports=("websocket",), stats_json=None,
+                                stats_dump=Path(tmp.name) / f"worker{i}.npz")
+        pid = os.fork()
+        if pid == 0:  # child
+            code = 1
+            try:
+                signal.signal(signal.SIGINT, signal.SIG_DFL)
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                code = _run_worker(i, sock, make_server, worker_config)
+            except BaseException:
+                logging.getLogger(__name__).exception("worker %d failed", i)
+            finally:
+                logging.shutdown()
+                os._exit(code)
+        pids[pid] = i
+    stop = False
+
+    def request_stop(*_: Any) -> None:
+        nonlocal stop
+        stop = True
+
+    previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    log.info("listening on http://%s:%d (%d worker processes, WebSocket transport only)", host, port, workers)
+    code = 0
+    try:
+        while not stop:
+            pid, status = os.waitpid(-1, os.WNOHANG)
+            if pid:
+                log.error("worker %d exited unexpectedly (status %d): stopping", pids.pop(pid, -1), status)
+                code = 1
+                break
+            time.sleep(0.2)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        _stop_all(pids)
+        sock.close()
+        stats = [s for i in range(workers) if (Path(tmp.name) / f"worker{i}.npz").is_file()
+                 for s in load_stats(Path(tmp.name) / f"worker{i}.npz")]
+        log.info("stopped: %s", summary_line(summarize(stats)))
+        if config.stats_json is not None:
+            write_json_atomic(config.stats_json, stats_document(model, transport, stats, workers=workers))
+        tmp.cleanup()
+    return code
+
+
+def _stop_all(pids: dict[int, int], timeout: float = 10.0) -> None:
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+    deadline = time.monotonic() + timeout
+    while pids and time.monotonic() < deadline:
+        pid, _ = os.waitpid(-1, os.WNOHANG)
+        if pid:
+            pids.pop(pid, None)
+        else:
+            time.sleep(0.05)
+    for pid in pids:  # still running: it hung
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)

@@ -1,0 +1,216 @@
+"""``rbc bench``: round-trip latency of drive_server over the Unity wire, with the server's stage timings.
+
+Real JPEG frames (a recorded driving log, cycled) go through ``UnityWireClient`` closed loop, one frame
+per reply, so the numbers are what a simulator waits for. Without ``--model`` the networks are built with
+random weights (``tools.onnx_builders``; needs the ``onnx`` package, not torch): latency does not depend
+on the weights. The server runs as a child process unless ``--server URL`` points at a running one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import multiprocessing as mp
+import queue
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tools.frames import Frame, log_frames, synthetic_frames
+from tools.server_process import ServerProcess, ServerStartError
+from tools.unity_client import UnityWireClient
+
+log = logging.getLogger("rbc.bench")
+
+DEFAULT_LOG = Path(__file__).resolve().parents[1] / "tests" / "data" / "udacity-sample"
+STAGES = ("decode", "preprocess", "inference", "control", "total")
+
+
+@dataclass
+class BenchResult:
+    """One benchmark run (one model, M clients)."""
+
+    label: str
+    model: str
+    clients: int
+    frames_per_client: int
+    warmup: int
+    round_trip_ms: dict[str, float]
+    telemetry_per_s: float
+    server: dict[str, Any] = field(default_factory=dict)
+    workers: int = 1
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--server", default=None, help="benchmark a running server at this URL instead of starting one")
+    p.add_argument("--model", type=Path, default=None, help="ONNX model (default: build --arch with random weights)")
+    p.add_argument("--arch", choices=("shallow", "pilotnet", "both"), default="shallow",
+                   help="architecture(s) to build when no --model is given (default shallow)")
+    p.add_argument("--frames", type=int, default=2000, help="measured frames per client (default 2000)")
+    p.add_argument("--warmup", type=int, default=200, help="unmeasured frames per client first (default 200)")
+    p.add_argument("--clients", type=int, default=1, help="concurrent closed-loop clients, one process each")
+    p.add_argument("--log", type=Path, default=None, help="driving-log folder to take frames from "
+                   "(default: tests/data/udacity-sample, else synthetic frames)")
+    p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads of the started server")
+    p.add_argument("--workers", type=int, default=1, help="worker processes of the started server (default 1)")
+    p.add_argument("--stock-transport", action="store_true", help="start the server without transport tuning")
+    p.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
+
+
+def _load_frames(log_dir: Path | None) -> tuple[list[Frame], str]:
+    if log_dir is not None:
+        frames = log_frames(log_dir)
+        return frames, f"{len(frames)} frames of {log_dir}"
+    if DEFAULT_LOG.is_dir():
+        frames = log_frames(DEFAULT_LOG)
+        return frames, f"{len(frames)} frames of {DEFAULT_LOG.relative_to(DEFAULT_LOG.parents[2])}"
+    return synthetic_frames(64), "64 synthetic frames"
+
+
+def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Any = None) -> dict[str, Any]:
+    """One client: warm up, wait for the others, then ``frames_n`` timed exchanges."""
+    frames, _ = _load_frames(log_dir)
+    payloads = [f.payload() for f in frames]
+    rtts = np.empty(frames_n)
+    with UnityWireClient(url, timeout=30.0) as client:
+        for i in range(warmup):
+            client.exchange(payloads[i % len(payloads)])
+        if barrier is not None:
+            barrier.wait()
+        start = time.monotonic()
+        for i in range(frames_n):
+            rtts[i] = client.exchange(payloads[i % len(payloads)])[1]
+        end = time.monotonic()
+    return {"rtts": rtts, "start": start, "end": end}
+
+
+def _worker(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Any, results: Any) -> None:
+    try:
+        results.put(_closed_loop(url, log_dir, frames_n, warmup, barrier))
+    except BaseException as exc:  # report, never hang the parent
+        barrier.abort()
+        results.put({"error": f"{type(exc).__name__}: {exc}"})
+
+
+def drive(url: str, log_dir: Path | None, clients: int, frames_n: int, warmup: int) -> tuple[np.ndarray, float]:
+    """Run ``clients`` closed loops against ``url``; returns all round trips (s) and aggregate telemetry/s."""
+    if clients == 1:
+        runs = [_closed_loop(url, log_dir, frames_n, warmup)]
+    else:
+        ctx = mp.get_context("spawn")
+        barrier, results = ctx.Barrier(clients), ctx.Queue()
+        procs = [ctx.Process(target=_worker, args=(url, log_dir, frames_n, warmup, barrier, results), daemon=True)
+                 for _ in range(clients)]
+        for proc in procs:
+            proc.start()
+        runs = []
+        while len(runs) < clients:
+            try:
+                runs.append(results.get(timeout=1.0))
+            except queue.Empty:
+                if not any(p.is_alive() for p in procs):
+                    raise RuntimeError("client processes exited without reporting") from None
+        for proc in procs:
+            proc.join(timeout=30)
+        errors = [r["error"] for r in runs if "error" in r]
+        if errors:
+            raise RuntimeError(f"{len(errors)} client(s) failed: {errors[0]}")
+    rtts = np.concatenate([r["rtts"] for r in runs])
+    wall = max(r["end"] for r in runs) - min(r["start"] for r in runs)
+    return rtts, len(rtts) / wall
+
+
+def _percentiles_ms(rtts: np.ndarray) -> dict[str, float]:
+    p50, p90, p99 = np.percentile(rtts, [50, 90, 99]) * 1e3
+    return {"p50": round(float(p50), 4), "p90": round(float(p90), 4), "p99": round(float(p99), 4),
+            "max": round(float(rtts.max() * 1e3), 4), "mean": round(float(rtts.mean() * 1e3), 4)}
+
+
+def format_table(result: BenchResult) -> str:
+    """The human-readable table of one run."""
+    rows = [f"{'':24}{'p50':>8}{'p90':>8}{'p99':>8}{'max':>8}  ms"]
+    rt = result.round_trip_ms
+    rows.append(f"{'round trip (client)':24}{rt['p50']:8.3f}{rt['p90']:8.3f}{rt['p99']:8.3f}{rt['max']:8.3f}")
+    stages = result.server.get("total", {}).get("stages_ms", {})
+    for stage in STAGES:
+        if stage in stages:
+            s = stages[stage]
+            rows.append(f"{'server ' + stage:24}{s['p50']:8.3f}{s['p90']:8.3f}{s['p99']:8.3f}{s['max']:8.3f}")
+    total = result.server.get("total", {})
+    if total:
+        rows.append(f"server frames {total['frames']} (incl. warm-up), malformed {total['malformed']}")
+    rows.append(f"throughput {result.telemetry_per_s:,.0f} telemetry/s "
+                f"({result.clients} closed-loop client{'s' if result.clients > 1 else ''})")
+    return "\n".join(rows)
+
+
+def _bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir: Path | None) -> BenchResult:
+    if args.server:
+        rtts, rate = drive(args.server, log_dir, args.clients, args.frames, args.warmup)
+        return BenchResult(label, "(external server)", args.clients, args.frames, args.warmup,
+                           _percentiles_ms(rtts), round(rate, 1))
+    assert model is not None
+    with tempfile.TemporaryDirectory(prefix="rbc_bench_") as tmp:
+        stats_path = Path(tmp) / "stats.json"
+        server_args = ["--log-every", "0", "--threads", str(args.threads), "--workers", str(args.workers)]
+        if args.stock_transport:
+            server_args.append("--stock-transport")
+        server = ServerProcess(model, server_args, stats_json=stats_path)
+        server.start()
+        try:
+            rtts, rate = drive(server.url, log_dir, args.clients, args.frames, args.warmup)
+        finally:
+            server.stop()
+        stats = json.loads(stats_path.read_text()) if stats_path.is_file() else {}
+    stats.pop("clients", None)
+    return BenchResult(label, str(model), args.clients, args.frames, args.warmup, _percentiles_ms(rtts),
+                       round(rate, 1), stats, args.workers)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.clients < 1 or args.frames < 1 or args.warmup < 0:
+        log.error("--clients and --frames must be >= 1, --warmup >= 0")
+        return 2
+    frames, source = _load_frames(args.log)
+    with tempfile.TemporaryDirectory(prefix="rbc_bench_models_") as tmp:
+        if args.server:
+            models: list[tuple[str, Path | None]] = [("external", None)]
+        elif args.model is not None:
+            models = [(args.model.stem, args.model)]
+        else:
+            try:
+                from tools.onnx_builders import ARCHS, save_model
+            except ModuleNotFoundError as exc:
+                log.error("%s", exc)
+                return 2
+            names = ["shallow", "pilotnet"] if args.arch == "both" else [args.arch]
+            try:
+                models = [(f"{n} (random weights, {ARCHS[n].params:,} params)",
+                           save_model(n, Path(tmp) / f"{n}.onnx")) for n in names]
+            except ModuleNotFoundError as exc:
+                log.error("%s", exc)
+                return 2
+        results = []
+        for label, model in models:
+            workers = "" if args.server or args.workers == 1 else f", server with {args.workers} workers"
+            print(f"\n== {label}: {args.clients} client(s) x {args.frames} frames (+{args.warmup} warm-up), "
+                  f"{source}{workers}")
+            try:
+                result = _bench_one(args, label, model, args.log)
+            except (ServerStartError, RuntimeError, OSError) as exc:
+                log.error("benchmark failed: %s", exc)
+                return 1
+            print(format_table(result))
+            results.append(result)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"frames_source": source, "runs": [asdict(r) for r in results]}, indent=2)
+                             + "\n")
+        print(f"\nwrote {args.json}")
+    del frames
+    return 0
