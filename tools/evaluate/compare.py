@@ -43,6 +43,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="rbc train run folder of the same model, for the training time (same order)")
     p.add_argument("--frames", type=int, default=2000, help="frames per latency measurement")
     p.add_argument("--no-paper", action="store_true", help="leave out the paper's columns")
+    p.add_argument("--layout", choices=("table10", "table9"), default="table10",
+                   help="table10: models side by side with training time and latency; table9: one eval "
+                        "per behavior (simplistic, rigorous, collision) in the layout of the paper's Table 9")
     p.add_argument("--out", type=Path, required=True, help="Markdown file to write (and .json beside it)")
 
 
@@ -108,7 +111,28 @@ def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _table9(args: argparse.Namespace) -> int:
+    from tools.evaluate.report import table9
+
+    summaries = {}
+    for eval_dir in args.evals:
+        results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
+        summaries[results["meta"]["behavior"]] = results["summary"]
+    table = table9(summaries, with_paper=not args.no_paper)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    write_text(args.out, table)
+    print(table)
+    print(f"wrote {args.out}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    missing = [d for d in args.evals if not (d / "results.json").is_file()]
+    if missing:
+        log.error("%s has no results.json: run rbc eval --out %s first", missing[0], missing[0])
+        return 2
+    if args.layout == "table9":
+        return _table9(args)
     labels = args.labels or [d.name for d in args.evals]
     runs = args.runs or [None] * len(args.evals)
     if len(labels) != len(args.evals) or len(runs) != len(args.evals):
@@ -116,11 +140,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     columns = []
     for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
-        results_path = eval_dir / "results.json"
-        if not results_path.is_file():
-            log.error("%s has no results.json: run rbc eval --out %s first", eval_dir, eval_dir)
-            return 2
-        results = json.loads(results_path.read_text(encoding="utf-8"))
+        results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
         model = Path(results["meta"]["model"])
         log.info("measuring the deployment latency of %s", model)
         columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),
