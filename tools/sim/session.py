@@ -80,7 +80,10 @@ class ScenarioConfig:
     realtime: bool = False
     sim_fps: int = 60
     control_hz: float = 15.0  # lock-step only: one command per 1/control_hz s (the paper logs at 15 Hz)
-    seed: int = 0  # camera jitter and the autopilot's reaction times
+    seed: int = 0  # camera jitter and the autopilot's reaction times (and the spawn, see spawn_noise)
+    # With spawn_noise, every seed but 0 starts the car off its nominal pose by U(-0.5, 0.5) m sideways
+    # and U(-3, 3) degrees of yaw, so repeated runs of one experiment differ (rbc eval's mean +- std).
+    spawn_noise: bool = False
     max_lap_time_s: float | None = None  # None: 4x the time of a lap at the speed limit, at least 120 s
     speed_unit: str = SpeedUnit.MPH.value  # telemetry speed unit: mph like the stock simulator, or kmh
 
@@ -207,6 +210,10 @@ class Simulation:
         spawn_s = (track.start_s if config.spawn_s is None else config.spawn_s) % track.length
         x, y, heading = self._line_pose(spawn_s)
         yaw = heading + math.radians(config.yaw_offset_deg)
+        if config.spawn_noise and config.seed != 0:
+            noise = np.random.default_rng([config.seed, 7919])  # own stream: camera jitter stays as it was
+            lateral, dyaw = noise.uniform(-0.5, 0.5), math.radians(noise.uniform(-3.0, 3.0))
+            x, y, yaw = x - math.sin(heading) * lateral, y + math.cos(heading) * lateral, yaw + dyaw
         self.vehicle = Vehicle(VehicleState(0.0, 0.0, 0.0), self.params)
         self.vehicle.place(x, y, yaw)
         self.follower = TrackFollower(track, x, y)
