@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable
 from dataclasses import replace
@@ -11,6 +10,7 @@ import numpy as np
 import pytest
 
 from protocol import SteerCommand
+from tests.conftest import write_stadium
 from tools.sim.autopilot import AutopilotParams
 from tools.sim.drivers import AutopilotDriver, Frame, LocalDriver, Scene
 from tools.sim.rules import DEFAULT_RULES, Cause, Referee, Rules, angle_diff, body_hits, degree_of_autonomy
@@ -20,16 +20,7 @@ from tools.sim.vehicle import kmh_to_mps, mps_to_kmh
 
 def stadium(tmp_path, lanes: int = 1, road_width: float = 8.0, straight: float = 150.0, radius: float = 40.0) -> str:
     """A stadium track file: two straights (the first going east) joined by two half circles."""
-    h, r = straight / 2, radius
-    arc = (-60, -30, 0, 30, 60)
-    pts = [(-h + straight * k / 3, -r) for k in range(4)]
-    pts += [(h + r * math.cos(math.radians(a)), r * math.sin(math.radians(a))) for a in arc]
-    pts += [(h - straight * k / 3, r) for k in range(4)]
-    pts += [(-h - r * math.cos(math.radians(a)), -r * math.sin(math.radians(a))) for a in arc]
-    path = tmp_path / f"stadium_{lanes}_{straight:g}_{radius:g}.json"
-    path.write_text(json.dumps({"name": "stadium", "version": 1, "centerline": pts, "road_width": road_width,
-                                "lanes": lanes, "start": {"s": 10.0}}))
-    return str(path)
+    return write_stadium(tmp_path, lanes, road_width, straight, radius)
 
 
 class Scripted(LocalDriver):

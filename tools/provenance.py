@@ -3,24 +3,11 @@
 from __future__ import annotations
 
 import hashlib
-import subprocess
-from importlib import metadata
 from pathlib import Path
 
+from models.runfiles import code_version  # one definition, shared with training runs
 
-def code_version() -> str:
-    """``git describe`` of the checkout when there is one (with -dirty), else the package version."""
-    root = Path(__file__).resolve().parents[1]
-    try:
-        out = subprocess.run(["git", "describe", "--always", "--dirty", "--tags"], cwd=root, capture_output=True,
-                             text=True, timeout=5, check=True)
-        return f"git:{out.stdout.strip()}"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    try:
-        return f"pkg:{metadata.version('robust-behavioral-cloning')}"
-    except metadata.PackageNotFoundError:
-        return "unknown"
+__all__ = ["code_version", "file_sha256"]
 
 
 def file_sha256(path: str | Path) -> str:
