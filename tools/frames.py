@@ -8,7 +8,6 @@ Unity simulator sends (every value a string). Needs only numpy, opencv and ``pro
 from __future__ import annotations
 
 import base64
-import csv
 import itertools
 import logging
 from collections.abc import Iterator
@@ -17,82 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from models.datalog import find_log, read_log
 from protocol import FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG, encode_image, encode_telemetry
 
 log = logging.getLogger(__name__)
 
-LOG_NAMES = ("driving_log.csv", "Driving-Log.csv")
 CAMERAS = ("center", "left", "right")
-
-
-@dataclass(frozen=True)
-class LogRow:
-    """One row of a driving log; image paths already resolved to files next to the log."""
-
-    center: Path
-    left: Path
-    right: Path
-    steering: float  # normalised -1..1
-    throttle: float
-    brake: float
-    speed: float  # as recorded (mph for the stock simulator, km/h for the paper's)
-
-
-def find_log(path: Path) -> Path:
-    """The CSV of a driving log given the file itself or its folder."""
-    path = Path(path)
-    if path.is_file():
-        return path
-    for name in LOG_NAMES:
-        if (path / name).is_file():
-            return path / name
-    candidates = sorted(path.glob("*.csv"))
-    if len(candidates) == 1:
-        return candidates[0]
-    raise FileNotFoundError(f"no driving log ({' or '.join(LOG_NAMES)}) in {path}")
-
-
-def _resolve_image(recorded: str, log_dir: Path) -> Path:
-    """Only the file name of a recorded path is meaningful: the image is in IMG/ next to the log."""
-    name = recorded.strip().replace("\\", "/").rsplit("/", 1)[-1]
-    for candidate in (log_dir / "IMG" / name, log_dir / name):
-        if candidate.is_file():
-            return candidate
-    raise FileNotFoundError(f"image {name!r} (recorded as {recorded.strip()!r}) not found in {log_dir / 'IMG'}")
-
-
-def _number(text: str) -> float | None:
-    try:
-        return float(text.strip().replace(",", "."))
-    except ValueError:
-        return None
-
-
-def read_driving_log(path: Path) -> list[LogRow]:
-    """Read a Udacity-format driving log, tolerant of what real recordings contain.
-
-    Accepts Windows absolute paths, ``", "`` separators, an optional header row, and resolves each image
-    by its file name in ``IMG/`` next to the log.
-    """
-    csv_path = find_log(Path(path))
-    rows: list[LogRow] = []
-    with csv_path.open(newline="", encoding="utf-8-sig") as fh:
-        for lineno, fields in enumerate(csv.reader(fh, skipinitialspace=True), start=1):
-            if not fields or all(not f.strip() for f in fields):
-                continue
-            if len(fields) < 7:
-                raise ValueError(f"{csv_path}:{lineno}: expected 7 columns, got {len(fields)}")
-            numbers = [_number(f) for f in fields[3:7]]
-            if any(n is None for n in numbers):
-                if lineno == 1:  # header row
-                    continue
-                raise ValueError(f"{csv_path}:{lineno}: non-numeric steering/throttle/brake/speed {fields[3:7]}")
-            steering, throttle, brake, speed = (float(n) for n in numbers)  # type: ignore[arg-type]
-            center, left, right = (_resolve_image(f, csv_path.parent) for f in fields[:3])
-            rows.append(LogRow(center, left, right, steering, throttle, brake, speed))
-    if not rows:
-        raise ValueError(f"{csv_path}: no rows")
-    return rows
 
 
 @dataclass(frozen=True)
@@ -113,9 +42,13 @@ def log_frames(path: Path, camera: str = "center") -> list[Frame]:
     """All frames of a driving log from one camera, JPEG bytes sent as recorded."""
     if camera not in CAMERAS:
         raise ValueError(f"camera must be one of {CAMERAS}, not {camera!r}")
+    samples, _ = read_log(find_log(Path(path)))  # the training pipeline's tolerant reader (numpy/stdlib only)
     frames = []
-    for row in read_driving_log(path):
-        jpeg = getattr(row, camera).read_bytes()
+    for row in samples:
+        image = getattr(row, camera)
+        if image is None:
+            raise ValueError(f"{row.log}:{row.line}: the log has no {camera} camera image")
+        jpeg = image.read_bytes()
         frames.append(Frame(base64.b64encode(jpeg).decode("ascii"), row.steering * MAX_STEERING_DEG,
                             row.throttle, row.speed))
     return frames
