@@ -201,6 +201,27 @@ def test_socketio_client_4_under_node(server, tmp_path):
     assert parse_steer(events[2 + HOLD]["data"]) == STOP
 
 
+def test_node_and_unity_clients_at_once(server, tmp_path):
+    """The issue's acceptance: a JavaScript socket.io client and a Unity-wire client steered side by side."""
+    node = _node_client()
+    payloads = tmp_path / "payloads.json"
+    payloads.write_text(json.dumps([f.payload() for f in FRAMES[:30]]))
+    js = subprocess.Popen([node, str(REPO / "tests" / "js" / "drive_client.js"), server.url, str(payloads)],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        with UnityWireClient(server.url) as unity:
+            for frame in FRAMES[:30]:  # interleaved with the JS client's closed loop
+                command, _ = unity.exchange(frame.payload())
+                assert command is not None
+        out, err = js.communicate(timeout=60)
+    finally:
+        js.kill()
+    assert js.returncode == 0, err
+    events = [json.loads(line) for line in out.splitlines()]
+    assert events[-1] == {"done": True}
+    assert [e["event"] for e in events[:-1]] == ["steer"] * 30  # exactly one reply per telemetry, its own
+
+
 def test_stats_json_written_at_exit(model, tmp_path):
     stats_path = tmp_path / "stats.json"
     srv = ServerProcess(model, ["--log-every", "0.3"], stats_json=stats_path)
