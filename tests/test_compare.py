@@ -1,0 +1,25 @@
+"""Table 10 writer: training time from a run's history, latency and robustness side by side."""
+
+from tools.evaluate.compare import TABLE10_EXPERIMENTS, build_table, training_time_s
+
+
+def test_training_time_sums_the_epochs(tmp_path):
+    (tmp_path / "history.csv").write_text("epoch,train_loss,val_loss,seconds\n1,0.1,0.1,60.5\n2,0.1,0.1,59.5\n")
+    assert training_time_s(tmp_path) == 120.0
+    assert training_time_s(None) is None
+    assert training_time_s(tmp_path / "missing") is None
+
+
+def test_table10_rows_and_columns():
+    column = {"label": "PilotNet, ours", "training_time_s": 600.0,
+              "latency": {"server_total_ms": {"p50": 1.5, "p99": 2.1, "max": 3.0},
+                          "round_trip_ms": {"p50": 1.9, "p99": 2.7, "max": 3.5}},
+              "summary": {"no_variation": {"measure": "eta", "values": {"None": {"mean": 100.0, "std": 0.0}}}}}
+    text = build_table([column])
+    lines = text.splitlines()
+    assert lines[0].startswith("| Parameter | PilotNet, ours | NVIDIA's approach (paper) | Our approach (paper) |")
+    assert "| Training time | 10.0 min | ~1.8 hr | ~1.4 hr |" in text
+    assert "server 1.50 ms (p99 2.10, max 3.0); round trip 1.90 ms (p99 2.70)" in text
+    assert "| No variation | η = 100.0 ± 0.0 % |" in text
+    assert sum(line.startswith("| ") for line in lines) == 1 + 2 + len(TABLE10_EXPERIMENTS)
+    assert "Scene obstacle variation" not in text  # the paper's Table 10 leaves it out
