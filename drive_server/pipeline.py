@@ -47,7 +47,11 @@ class DrivePipeline:
 
     def steer(self, rgb: np.ndarray) -> float:
         """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``)."""
-        value = self.model.predict(preprocess(rgb, self.contract))
+        return self._usable(self.model.predict(preprocess(rgb, self.contract)))
+
+    @staticmethod
+    def _usable(value: float) -> float:
+        """The model's output as a steering command: finite, clamped to -1..1."""
         if not math.isfinite(value):
             raise InferenceError(f"model output is not finite: {value!r}")
         return max(-1.0, min(1.0, value))
@@ -69,9 +73,7 @@ class DrivePipeline:
         t2 = perf_counter()
         value = self.model.predict(x)
         t3 = perf_counter()
-        if not math.isfinite(value):
-            raise InferenceError(f"model output is not finite: {value!r}")
-        command = self.control(max(-1.0, min(1.0, value)), telemetry.speed)
+        command = self.control(self._usable(value), telemetry.speed)
         t4 = perf_counter()
         return command, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)
 

@@ -31,7 +31,7 @@ class DriverSpec:
     tau: float = 1.0
 
     def __post_init__(self) -> None:
-        if (self.model is None) == (self.server is None) and self.server is None:
+        if self.model is None and self.server is None:
             raise ValueError("give a model (in-process) or a server URL")
 
 
