@@ -23,3 +23,22 @@ def test_table10_rows_and_columns():
     assert "| No variation | η = 100.0 ± 0.0 % |" in text
     assert sum(line.startswith("| ") for line in lines) == 1 + 2 + len(TABLE10_EXPERIMENTS)
     assert "Scene obstacle variation" not in text  # the paper's Table 10 leaves it out
+
+
+def test_training_budget_and_validation_mse_rows(tmp_path):
+    import json
+
+    from tools.evaluate.compare import training_summary
+
+    (tmp_path / "config.json").write_text(json.dumps({
+        "config": {"arch": "pilotnet", "approach": "nvidia", "batch_size": 256, "aug_loops": 8},
+        "resolved": {"epochs": 2, "steps_per_epoch": 280}}))
+    (tmp_path / "history.csv").write_text("epoch,train_loss,val_loss,seconds\n1,0.2,0.015,60\n2,0.1,0.0125,60\n")
+    train = training_summary(tmp_path)
+    assert train["val_mse"] == 0.0125 and train["epochs"] == 2
+    assert training_summary(None) == {} and training_summary(tmp_path / "missing") == {}
+    column = {"label": "PilotNet, NVIDIA", "training_time_s": 120.0, "training": train,
+              "latency": {"round_trip_ms": {"p50": 1.0, "p99": 2.0, "max": 3.0}}, "summary": {}}
+    text = build_table([column], with_paper=False)
+    assert "| Training budget | 2 × 280 steps of 256 (0.14 M samples) |" in text
+    assert "| Validation MSE | 0.0125 |" in text

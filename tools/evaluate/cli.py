@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import time
@@ -11,7 +12,7 @@ from pathlib import Path
 
 from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS
 from tools.evaluate.report import format_cell, plot_experiments, table9, write_json, write_text
-from tools.evaluate.runner import DriverSpec, Runner, spec_dict
+from tools.evaluate.runner import DriverSpec, Runner, read_journal, spec_dict
 from tools.evaluate.suite import SuiteConfig, run_suite
 from tools.provenance import code_version, file_sha256
 
@@ -33,6 +34,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track", help="override the behavior's track (name or JSON file)")
     p.add_argument("--speed-limit", type=float, default=25.0, help="km/h for every experiment but the speed one")
     p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
+    p.add_argument("--resume", action="store_true",
+                   help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "
+                        "of the same model (runs.jsonl); only the missing runs are driven")
 
 
 def _model_path(args: argparse.Namespace) -> Path:
@@ -53,19 +57,21 @@ def run(args: argparse.Namespace) -> int:
         experiments = tuple(e for e in experiments if e != "speed_limit")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    journal = out / "runs.jsonl"
-    journal.unlink(missing_ok=True)
     spec = DriverSpec(model=None if args.server else str(model), server=args.server)
+    model_sha = file_sha256(model)
+    journal = out / "runs.jsonl"
+    reuse = _prepare_journal(out, journal, {"model_sha256": model_sha, "behavior": args.behavior,
+                                            "driver": _driver_identity(spec)}, args.resume)
     cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
                       map_dir=str(out / "failures"))
-    meta = {"model": str(model), "model_sha256": file_sha256(model), "code_version": code_version(),
+    meta = {"model": str(model), "model_sha256": model_sha, "code_version": code_version(),
             "behavior": args.behavior, "seeds": args.seeds, "base_seed": args.seed, "laps": args.laps,
             "workers": args.workers, "driver": spec_dict(spec), "autonomy_rule": AUTONOMY_RULE,
             "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}
 
     progress = _progress()
-    runner = Runner(spec, args.workers, journal, on_result=progress)
+    runner = Runner(spec, args.workers, journal, on_result=progress, reuse=reuse)
     started = time.perf_counter()
     summary, interrupted = {}, False
     try:
@@ -76,14 +82,17 @@ def run(args: argparse.Namespace) -> int:
     finally:
         runner.close(cancel=interrupted)
     wall = time.perf_counter() - started
-    meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records))
+    meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records),
+                resumed_runs=runner.reused)
     write_json(out / "results.json", {"meta": meta, "summary": summary, "runs": runner.records})
     if interrupted:
-        print(f"interrupted after {wall:.0f} s; {len(runner.records)} finished runs in {out / 'results.json'}")
+        print(f"interrupted after {wall:.0f} s; {len(runner.records)} finished runs in {out / 'results.json'} "
+              f"(continue with the same command plus --resume)")
         return 130
     write_text(out / "table9.md", table9({args.behavior: summary}))
     plots = plot_experiments(summary, runner.records, out)
-    print(f"\nRobustness of {model.name} ({args.behavior}), {len(runner.records)} runs, "
+    resumed = f" ({runner.reused} reused from the journal)" if runner.reused else ""
+    print(f"\nRobustness of {model.name} ({args.behavior}), {len(runner.records)} runs{resumed}, "
           f"{args.workers} workers, wall {wall:.0f} s")
     width = max(len(e.title) for e in EXPERIMENTS)
     for exp in EXPERIMENTS:
@@ -91,6 +100,43 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
     print(f"\nwrote {out / 'results.json'}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
     return 0
+
+
+def _driver_identity(spec: DriverSpec) -> dict:
+    """What of the driver decides the runs (not the model path or server URL, which may move)."""
+    fields = {k: v for k, v in spec_dict(spec).items() if k not in ("model", "server")}
+    return fields | {"mode": "socket" if spec.server else "in-process"}
+
+
+def _prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> dict[str, dict]:
+    """Start a fresh journal, or (``--resume``) load the runs of an earlier one for the same model.
+
+    ``journal.json`` beside the journal says which model and driver wrote it, so a resume never mixes
+    runs of two models. A fresh start keeps an earlier journal as runs.previous.jsonl instead of deleting it.
+    """
+    identity_file = out / "journal.json"
+    reuse: dict[str, dict] = {}
+    if resume and journal.is_file():
+        if identity_file.is_file():
+            earlier = json.loads(identity_file.read_text(encoding="utf-8"))
+            if earlier != identity:
+                diff = sorted(k for k in identity if earlier.get(k) != identity[k])
+                raise SystemExit(f"rbc eval --resume: the journal in {out} was written for a different "
+                                 f"{', '.join(diff)}; use a new --out, or drop --resume to start afresh")
+        reuse = read_journal(journal)
+        # rewrite it with the complete records only, so new runs never append to a line cut in half
+        tmp = journal.with_suffix(".jsonl.tmp")
+        tmp.write_text("".join(json.dumps(r) + "\n" for r in reuse.values()), encoding="utf-8")
+        tmp.replace(journal)
+        log.info("resuming: %d finished runs in %s", len(reuse), journal)
+    elif resume:
+        log.warning("--resume: no journal in %s; starting afresh", out)
+    elif journal.is_file() and journal.stat().st_size:
+        journal.replace(out / "runs.previous.jsonl")
+        log.info("starting afresh; the earlier journal is kept as %s (--resume would have reused it)",
+                 out / "runs.previous.jsonl")
+    write_json(identity_file, identity)
+    return reuse
 
 
 def _progress():

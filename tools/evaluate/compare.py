@@ -63,6 +63,32 @@ def training_time_s(run_dir: Path | None) -> float | None:
     return sum(float(r[key]) for r in rows) if key else None
 
 
+def training_summary(run_dir: Path | None) -> dict[str, Any]:
+    """The training budget and final validation MSE of a run, so unequal schedules are visible in the table."""
+    if run_dir is None or not (run_dir / "config.json").is_file():
+        return {}
+    stored = json.loads((run_dir / "config.json").read_text(encoding="utf-8"))
+    cfg, resolved = stored.get("config", {}), stored.get("resolved", {})
+    out: dict[str, Any] = {"arch": cfg.get("arch"), "approach": cfg.get("approach"),
+                           "epochs": resolved.get("epochs"), "steps_per_epoch": resolved.get("steps_per_epoch"),
+                           "batch_size": cfg.get("batch_size"), "aug_loops": cfg.get("aug_loops")}
+    history = run_dir / "history.csv"
+    if history.is_file():
+        with history.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+        if rows and "val_loss" in rows[-1]:
+            out["val_mse"] = float(rows[-1]["val_loss"])
+    return out
+
+
+def _fmt_budget(train: dict[str, Any]) -> str:
+    if not train.get("epochs") or not train.get("steps_per_epoch") or not train.get("batch_size"):
+        return "n/a"
+    samples = train["epochs"] * train["steps_per_epoch"] * train["batch_size"]
+    steps = f"{train['epochs']} × {train['steps_per_epoch']} steps of {train['batch_size']}"
+    return f"{steps} ({samples / 1e6:.2f} M samples)"
+
+
 def measure_latency(model: Path, frames: int) -> dict[str, Any]:
     """Serve ``model`` with drive_server and drive it with the Unity-wire client; server stats + round trip."""
     import numpy as np
@@ -100,9 +126,13 @@ def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
     def row(title: str, cells: list[str], key: str) -> None:
-        lines.append("| " + " | ".join([title, *cells, *(p[key] for _, p in paper)]) + " |")
+        lines.append("| " + " | ".join([title, *cells, *(p.get(key, "") for _, p in paper)]) + " |")
 
     row("Training time", [_fmt_time(c["training_time_s"]) for c in columns], "training_time")
+    if any(c.get("training") for c in columns):
+        row("Training budget", [_fmt_budget(c.get("training") or {}) for c in columns], "training_budget")
+        row("Validation MSE", [f"{c['training']['val_mse']:.4f}" if "val_mse" in (c.get("training") or {})
+                               else "n/a" for c in columns], "val_mse")
     row("Deployment latency", [_fmt_latency(c["latency"]) for c in columns], "latency")
     for exp in TABLE10_EXPERIMENTS:
         row(exp.title, [format_cell(c["summary"].get(exp.key)) for c in columns], exp.key)
@@ -145,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
         log.info("measuring the deployment latency of %s", model)
         columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),
                         "model_sha256": results["meta"]["model_sha256"], "summary": results["summary"],
-                        "training_time_s": training_time_s(run_dir), "latency": measure_latency(model, args.frames)})
+                        "training_time_s": training_time_s(run_dir), "training": training_summary(run_dir),
+                        "latency": measure_latency(model, args.frames)})
     table = build_table(columns, with_paper=not args.no_paper)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_text(args.out, table)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import threading
 import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -76,7 +77,7 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
     started = time.perf_counter()
     result = run_scenario(config, _driver(spec, config.speed_limit_kmh))
     record = {"experiment": task.experiment, "behavior": task.behavior, "value": task.value, "seed": task.seed,
-              "wall_time_s": round(time.perf_counter() - started, 3), **result.to_dict()}
+              "wall_time_s": round(time.perf_counter() - started, 3), **result.to_dict(), "scenario": task.scenario}
     record["autonomous"] = is_autonomous(record)
     if task.map_dir and not record["autonomous"]:
         from tools.sim.viz import write_trajectory_map
@@ -92,21 +93,69 @@ def _init_worker() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
+def task_key(experiment: str, value: Any, seed: int, scenario: dict[str, Any]) -> str:
+    """What makes two runs the same run: a resumed evaluation reuses a journaled record with this key."""
+    return json.dumps([experiment, value, seed, scenario], sort_keys=True)
+
+
+def record_key(record: dict[str, Any]) -> str | None:
+    if "scenario" not in record:
+        return None
+    return task_key(record["experiment"], record["value"], record["seed"], record["scenario"])
+
+
+def read_journal(path: Path) -> dict[str, dict[str, Any]]:
+    """Finished runs of an earlier (interrupted) evaluation, by task key.
+
+    A line cut short by the interruption is skipped with a warning, never fatal.
+    """
+    found: dict[str, dict[str, Any]] = {}
+    if not path.is_file():
+        return found
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+            key = record_key(record)
+        except (json.JSONDecodeError, KeyError, TypeError):
+            log.warning("%s line %d is not a complete run record; it will be run again", path, n)
+            continue
+        if key is not None:
+            found[key] = record
+    return found
+
+
 class Runner:
     """A process pool that records every finished run to a JSON-lines journal as it arrives.
 
-    The journal makes an interrupted evaluation keep its finished runs.
+    The journal makes an interrupted evaluation keep its finished runs; ``reuse`` (journaled records
+    by task key) lets a resumed evaluation skip them: they are neither run nor journaled again.
     """
 
     def __init__(self, spec: DriverSpec, workers: int, journal: Path,
-                 on_result: Callable[[dict[str, Any]], None] | None = None) -> None:
+                 on_result: Callable[[dict[str, Any]], None] | None = None,
+                 reuse: dict[str, dict[str, Any]] | None = None) -> None:
         self.spec = spec
         self.journal = journal
         self.on_result = on_result
         self.records: list[dict[str, Any]] = []
+        self.reused = 0
+        self._reuse = dict(reuse or {})
+        self._lock = threading.Lock()
         self._pool = ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_worker)
 
     def submit(self, task: Task) -> Future:
+        done = self._reuse.pop(task_key(task.experiment, task.value, task.seed, task.scenario), None)
+        if done is not None:
+            future: Future = Future()
+            future.set_result(done)
+            with self._lock:
+                self.reused += 1
+                self.records.append(done)
+            if self.on_result:
+                self.on_result(done)
+            return future
         future = self._pool.submit(run_task, self.spec, task)
         future.add_done_callback(self._record)
         return future
@@ -119,9 +168,10 @@ class Runner:
         if future.cancelled() or future.exception() is not None:
             return
         record = future.result()
-        self.records.append(record)
-        with self.journal.open("a", encoding="utf-8") as fh:
-            fh.write(json.dumps(record) + "\n")
+        with self._lock:
+            self.records.append(record)
+            with self.journal.open("a", encoding="utf-8") as fh:
+                fh.write(json.dumps(record) + "\n")
         if self.on_result:
             self.on_result(record)
 
