@@ -84,3 +84,19 @@ def test_experiment_lookup():
     assert experiment("speed_limit").realtime
     with pytest.raises(KeyError):
         experiment("nope")
+
+
+def test_plot_points_draw_a_range_from_its_no_variation_run():
+    from tools.evaluate.experiments import experiment
+    from tools.evaluate.report import plot_points
+
+    def rec(exp, value, seed, eta, ok):
+        return {"experiment": exp, "value": value, "seed": seed, "laps": [{"eta": eta}], "autonomous": ok}
+
+    records = [rec("no_variation", None, 1, 100.0, True), rec("no_variation", None, 0, 100.0, True),
+               rec("light_intensity", 1.2, 0, 100.0, True), rec("light_intensity", 0.8, 0, 90.0, False)]
+    entry = {"measure": "range", "origin": 1.0}
+    points = plot_points(experiment("light_intensity"), entry, records)
+    assert [(round(x, 6), y, ok) for x, y, ok in points] == [(-0.2, 90.0, False), (0.0, 100.0, True),
+                                                              (0.2, 100.0, True)]
+    assert plot_points(experiment("orientation"), {"measure": "range", "origin": 0.0}, records) == []

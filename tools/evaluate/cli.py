@@ -130,7 +130,7 @@ def _prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> 
         tmp.replace(journal)
         log.info("resuming: %d finished runs in %s", len(reuse), journal)
     elif resume:
-        log.warning("--resume: no journal in %s; starting afresh", out)
+        log.info("--resume: no journal in %s yet; starting afresh", out)
     elif journal.is_file() and journal.stat().st_size:
         journal.replace(out / "runs.previous.jsonl")
         log.info("starting afresh; the earlier journal is kept as %s (--resume would have reused it)",

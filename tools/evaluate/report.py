@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, PAPER_TABLE9
+from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, PAPER_TABLE9, Experiment
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +86,24 @@ def table9(summaries: dict[str, dict[str, Any]], with_paper: bool = True) -> str
     return "\n".join(lines) + "\n"
 
 
+def plot_points(exp: Experiment, entry: dict[str, Any], records: list[dict[str, Any]]
+                ) -> list[tuple[float, float, bool]]:
+    """(value, eta, autonomous) of every run of a searched experiment, in order of value.
+
+    Ranges are drawn as offsets from the default, and include the no-variation run they start from.
+    """
+    runs = [r for r in records if r["experiment"] == exp.key]
+    if not runs:
+        return []
+    origin = entry["origin"] if exp.measure == "range" else 0
+    base = [r for r in records if r["experiment"] == "no_variation"]
+    if exp.measure == "range" and base:
+        runs.append(min(base, key=lambda r: r["seed"]) | {"value": origin})
+    runs.sort(key=lambda r: r["value"])
+    return [(r["value"] - origin, sum(lap["eta"] for lap in r["laps"]) / max(1, len(r["laps"])), r["autonomous"])
+            for r in runs]
+
+
 def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out_dir: Path) -> list[Path]:
     """eta against each varied parameter (pass/fail marked). Needs matplotlib (the plots extra)."""
     try:
@@ -101,13 +119,10 @@ def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out
         entry = summary.get(exp.key)
         if not entry or entry["measure"] == "eta":
             continue
-        runs = [r for r in records if r["experiment"] == exp.key]
-        if not runs:
+        points = plot_points(exp, entry, records)
+        if not points:
             continue
-        runs.sort(key=lambda r: r["value"])
-        xs = [r["value"] - (entry["origin"] if exp.measure == "range" else 0) for r in runs]
-        ys = [sum(lap["eta"] for lap in r["laps"]) / max(1, len(r["laps"])) for r in runs]
-        ok = [r["autonomous"] for r in runs]
+        xs, ys, ok = (list(v) for v in zip(*points, strict=True))
         fig, ax = plt.subplots(figsize=(6, 3.2), dpi=110)
         ax.plot(xs, ys, "-", color="0.6", zorder=1)
         ax.scatter([x for x, o in zip(xs, ok, strict=True) if o], [y for y, o in zip(ys, ok, strict=True) if o],
