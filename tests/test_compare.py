@@ -42,3 +42,23 @@ def test_training_budget_and_validation_mse_rows(tmp_path):
     text = build_table([column], with_paper=False)
     assert "| Training budget | 2 × 280 steps of 256 (0.14 M samples) |" in text
     assert "| Validation MSE | 0.0125 |" in text
+
+
+def test_range_chart_reads_offsets_caps_and_empty_ranges(tmp_path):
+    import pytest
+
+    from tools.evaluate.range_chart import measured_range, plot_ranges
+
+    entry = {"measure": "range", "origin": 1.0, "caps": [0.1, 2.5],
+             "lower": {"limit": 0.8, "hit_cap": False}, "upper": {"limit": 2.5, "hit_cap": True}}
+    lo, hi, lo_cap, hi_cap = measured_range(entry)
+    assert (lo, hi, lo_cap, hi_cap) == (pytest.approx(-0.2), pytest.approx(1.5), False, True)
+    assert measured_range(entry | {"empty": True}) is None
+    assert measured_range(None) is None
+    assert measured_range({"measure": "eta", "values": {}}) is None
+    pytest.importorskip("matplotlib")
+    chart = plot_ranges([{"label": "a", "summary": {"light_intensity": entry}},
+                         {"label": "b", "summary": {"light_intensity": entry | {"empty": True}}}],
+                        tmp_path / "t10.png")
+    assert chart == tmp_path / "t10.png" and chart.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(tmp_path.glob("*.tmp*"))

@@ -126,7 +126,7 @@ def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
     def row(title: str, cells: list[str], key: str) -> None:
-        lines.append("| " + " | ".join([title, *cells, *(p.get(key, "") for _, p in paper)]) + " |")
+        lines.append("| " + " | ".join([title, *cells, *(p.get(key, "–") for _, p in paper)]) + " |")
 
     row("Training time", [_fmt_time(c["training_time_s"]) for c in columns], "training_time")
     if any(c.get("training") for c in columns):
@@ -181,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_text(args.out, table)
     write_text(args.out.with_suffix(".json"), json.dumps(columns, indent=2, default=str))
+    from tools.evaluate.range_chart import plot_ranges
+
+    chart = plot_ranges(columns, args.out.with_suffix(".png"), with_paper=not args.no_paper)
     print(table)
-    print(f"wrote {args.out}")
+    print(f"wrote {args.out}" + (f" and {chart}" if chart else ""))
     return 0
