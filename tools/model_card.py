@@ -32,7 +32,7 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
         f"({r['zero_steer_train_samples']} zero-steer training samples before balancing) |",
         f"| training | {c['arch']}, {r['epochs']} epochs x {r['steps_per_epoch']} steps of {c['batch_size']}, "
         f"augmentation loops {c['aug_loops']}, Adam {c['learning_rate']}, MSE, seed {c['seed']} |",
-        f"| training time | {train_s / 60:.1f} min on a 2-core CPU (shared with other jobs) |",
+        f"| training time | {train_s / 60:.1f} min on a 2-core CPU |",
         f"| validation MSE | {float(history[-1]['val_loss']):.5f} (final epoch) |",
         f"| preprocessing | {json.dumps(cfg['contract'])} (in the ONNX metadata) |",
         f"| closed loop, no variation | eta = {lap['eta']:.1f} % on `{sc['track']}`"
