@@ -11,6 +11,17 @@ import csv
 import json
 from pathlib import Path
 
+ARCHITECTURES = {"shallow": "The paper's shallow CNN (14,065 parameters, 64x64 input)",
+                 "pilotnet": "NVIDIA's PilotNet (252,219 parameters, 200x66 input)"}
+
+
+def _approach(approach: str, resolved: dict) -> str:
+    if approach == "nvidia":
+        return ("NVIDIA's approach (centre camera only, crop, YUV, no zero-steer balancing; random flip, a "
+                "horizontal viewpoint shift and milder brightness)")
+    return (f"the paper's approach (ours: zero-steer balancing lambda = {resolved['deletion_rate']}, "
+            "the augmentations of Table 5)")
+
 
 def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name: str) -> str:
     cfg = json.loads((run_dir / "config.json").read_text(encoding="utf-8"))
@@ -20,11 +31,11 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
     train_s = sum(float(h["seconds"]) for h in history)
     lap = sim_result["laps"][0]
     sc = sim_result["config"]
+    model_flag = "" if onnx_name == f"{behavior}.onnx" else f" --model models/pretrained/{onnx_name}"
     lines = [
         f"# `{onnx_name}`: {behavior} driving behavior",
         "",
-        f"The paper's shallow CNN (14,065 parameters) trained with the paper's approach ({c['approach']}: zero-steer "
-        f"balancing lambda = {r['deletion_rate']}, the six augmentations of Table 5) on data recorded by "
+        f"{ARCHITECTURES.get(c['arch'], c['arch'])} trained with {_approach(c['approach'], r)} on data recorded by "
         "`rbc collect` in the headless simulator.",
         "",
         "| | |", "|---|---|",
@@ -47,7 +58,8 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
         recipe,
         "```",
         "",
-        f"Robustness (the paper's eight experiments): `rbc eval --behavior {behavior} --out eval/{behavior}`.",
+        f"Robustness (the paper's eight experiments): `rbc eval --behavior {behavior}{model_flag} "
+        f"--out eval/{Path(onnx_name).stem}`.",
         "",
     ]
     return "\n".join(lines)
