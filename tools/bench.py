@@ -208,9 +208,9 @@ def run(args: argparse.Namespace) -> int:
             print(format_table(result))
             results.append(result)
     if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"frames_source": source, "runs": [asdict(r) for r in results]}, indent=2)
-                             + "\n")
+        from models.runfiles import write_json
+
+        write_json(args.json, {"frames_source": source, "runs": [asdict(r) for r in results]})
         print(f"\nwrote {args.json}")
     del frames
     return 0

@@ -42,6 +42,7 @@ def _server_latency(stats_path: Path) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from drive_server.models_dir import bundled_model_path
+    from models.runfiles import write_json
     from tools.server_process import ServerProcess, ServerStartError
     from tools.sim.cli import Progress, print_summary
     from tools.sim.drivers import SocketDriver
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print_summary(result, f"speed limit {args.speed_limit:g} km/h (drive_server)")
     print(_server_latency(stats_path))
-    (out / "result.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+    write_json(out / "result.json", result.to_dict())
     print(f"\nmap   {write_trajectory_map(result, out / 'map.png')}")
     if strip.frames:
         print(f"strip {strip.write(out / 'strip.png')}")

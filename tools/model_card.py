@@ -7,9 +7,10 @@ Used when (re)building ``models/pretrained``: ``python -m tools.model_card RUN_D
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 from pathlib import Path
+
+from models.runfiles import CONFIG, HISTORY, read_history, write_text
 
 ARCHITECTURES = {"shallow": "The paper's shallow CNN (14,065 parameters, 64x64 input)",
                  "pilotnet": "NVIDIA's PilotNet (252,219 parameters, 200x66 input)"}
@@ -24,11 +25,10 @@ def _approach(approach: str, resolved: dict) -> str:
 
 
 def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name: str) -> str:
-    cfg = json.loads((run_dir / "config.json").read_text(encoding="utf-8"))
-    with (run_dir / "history.csv").open(newline="", encoding="utf-8") as fh:
-        history = list(csv.DictReader(fh))
+    cfg = json.loads((run_dir / CONFIG).read_text(encoding="utf-8"))
+    history = read_history(run_dir / HISTORY)
     c, r = cfg["config"], cfg["resolved"]
-    train_s = sum(float(h["seconds"]) for h in history)
+    train_s = sum(h["seconds"] for h in history)
     lap = sim_result["laps"][0]
     sc = sim_result["config"]
     model_flag = "" if onnx_name == f"{behavior}.onnx" else f" --model models/pretrained/{onnx_name}"
@@ -44,7 +44,7 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
         f"| training | {c['arch']}, {r['epochs']} epochs x {r['steps_per_epoch']} steps of {c['batch_size']}, "
         f"augmentation loops {c['aug_loops']}, Adam {c['learning_rate']}, MSE, seed {c['seed']} |",
         f"| training time | {train_s / 60:.1f} min on a 2-core CPU |",
-        f"| validation MSE | {float(history[-1]['val_loss']):.5f} (final epoch) |",
+        f"| validation MSE | {history[-1]['val_loss']:.5f} (final epoch) |",
         f"| preprocessing | {json.dumps(cfg['contract'])} (in the ONNX metadata) |",
         f"| closed loop, no variation | eta = {lap['eta']:.1f} % on `{sc['track']}`"
         + (f" with {sc['cones']} cones (seed {sc['cone_seed']})" if sc["cones"] else "")
@@ -74,7 +74,7 @@ def main() -> None:
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args()
     text = card(a.run_dir, a.behavior, a.recipe, json.loads(a.sim_json.read_text()), a.out.with_suffix(".onnx").name)
-    a.out.write_text(text, encoding="utf-8")
+    write_text(a.out, text)
 
 
 if __name__ == "__main__":

@@ -10,8 +10,9 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
+from models.runfiles import write_json, write_text
 from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS
-from tools.evaluate.report import format_cell, plot_experiments, table9, write_json, write_text
+from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, Runner, read_journal, spec_dict
 from tools.evaluate.suite import SuiteConfig, run_suite
 from tools.provenance import code_version, file_sha256
@@ -125,9 +126,7 @@ def _prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> 
                                  f"{', '.join(diff)}; use a new --out, or drop --resume to start afresh")
         reuse = read_journal(journal)
         # rewrite it with the complete records only, so new runs never append to a line cut in half
-        tmp = journal.with_suffix(".jsonl.tmp")
-        tmp.write_text("".join(json.dumps(r) + "\n" for r in reuse.values()), encoding="utf-8")
-        tmp.replace(journal)
+        write_text(journal, "".join(json.dumps(r) + "\n" for r in reuse.values()))
         log.info("resuming: %d finished runs in %s", len(reuse), journal)
     elif resume:
         log.info("--resume: no journal in %s yet; starting afresh", out)

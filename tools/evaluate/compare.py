@@ -8,30 +8,37 @@ per-stage statistics, on the same frames for every model.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import logging
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS
-from tools.evaluate.report import format_cell, write_text
+from models.runfiles import CONFIG, HISTORY, read_history, write_text
+from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
+from tools.evaluate.report import format_cell, format_range
 
 log = logging.getLogger("rbc.compare")
 
 #: Table 10 rows (the paper leaves out the obstacle experiment there).
 TABLE10_EXPERIMENTS = tuple(e for e in EXPERIMENTS if e.key != "obstacles")
+#: The paper's Table 10 ranges (offsets from the default), as numbers: the table and the chart use them.
+PAPER_TABLE10_RANGES: dict[str, dict[str, tuple[float, float]]] = {
+    "NVIDIA's approach (paper)": {"light_intensity": (-0.2, 0.3), "light_direction": (-3.0, 7.0),
+                                  "orientation": (-20.0, 10.0)},
+    "Our approach (paper)": {"light_intensity": (-0.6, 1.2), "light_direction": (-30.0, 30.0),
+                             "orientation": (-45.0, 10.0)},
+}
 PAPER_TABLE10 = {
     "NVIDIA's approach (paper)": {
         "training_time": "~1.8 hr", "latency": "4-7 ms (mode 4.99 ms)", "no_variation": "≈100 %",
-        "light_intensity": "[-0.2, +0.3] cd", "light_direction": "[-3°, +7°]", "position": "≈100 %",
-        "orientation": "[-20°, +10°]", "heading_inversion": "≈100 %", "speed_limit": "50 km/h"},
+        "position": "≈100 %", "heading_inversion": "≈100 %", "speed_limit": "50 km/h"},
     "Our approach (paper)": {
         "training_time": "~1.4 hr", "latency": "2-6 ms (mode 3.99 ms)", "no_variation": "≈100 %",
-        "light_intensity": "[-0.6, +1.2] cd", "light_direction": "[-30°, +30°]", "position": "≈100 %",
-        "orientation": "[-45°, +10°]", "heading_inversion": "≈100 %", "speed_limit": "100 km/h"},
+        "position": "≈100 %", "heading_inversion": "≈100 %", "speed_limit": "100 km/h"},
 }
+for _column, _ranges in PAPER_TABLE10_RANGES.items():
+    PAPER_TABLE10[_column].update({k: format_range(lo, hi, experiment(k).unit) for k, (lo, hi) in _ranges.items()})
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,36 +56,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="Markdown file to write (and .json beside it)")
 
 
+def training_summary(run_dir: Path | None) -> dict[str, Any]:
+    """Budget (config.json), wall seconds and final validation MSE (history.csv) of a training run.
+
+    The budget makes unequal schedules visible in the table; an empty dict when nothing is known.
+    """
+    if run_dir is None:
+        return {}
+    out: dict[str, Any] = {}
+    if (run_dir / CONFIG).is_file():
+        stored = json.loads((run_dir / CONFIG).read_text(encoding="utf-8"))
+        cfg, resolved = stored.get("config", {}), stored.get("resolved", {})
+        out.update(arch=cfg.get("arch"), approach=cfg.get("approach"), epochs=resolved.get("epochs"),
+                   steps_per_epoch=resolved.get("steps_per_epoch"), batch_size=cfg.get("batch_size"),
+                   aug_loops=cfg.get("aug_loops"))
+    if not (run_dir / HISTORY).is_file():
+        log.warning("no %s in %s: training time unknown", HISTORY, run_dir)
+        return out
+    rows = read_history(run_dir / HISTORY)
+    if rows:
+        out.update(seconds=sum(r["seconds"] for r in rows), val_mse=rows[-1]["val_loss"])
+    return out
+
+
 def training_time_s(run_dir: Path | None) -> float | None:
     """Wall seconds of a training run: the sum of history.csv's per-epoch seconds."""
-    if run_dir is None:
-        return None
-    history = run_dir / "history.csv"
-    if not history.is_file():
-        log.warning("no history.csv in %s: training time unknown", run_dir)
-        return None
-    with history.open(newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
-    key = next((k for k in ("seconds", "epoch_seconds", "wall_s", "time_s") if rows and k in rows[0]), None)
-    return sum(float(r[key]) for r in rows) if key else None
-
-
-def training_summary(run_dir: Path | None) -> dict[str, Any]:
-    """The training budget and final validation MSE of a run, so unequal schedules are visible in the table."""
-    if run_dir is None or not (run_dir / "config.json").is_file():
-        return {}
-    stored = json.loads((run_dir / "config.json").read_text(encoding="utf-8"))
-    cfg, resolved = stored.get("config", {}), stored.get("resolved", {})
-    out: dict[str, Any] = {"arch": cfg.get("arch"), "approach": cfg.get("approach"),
-                           "epochs": resolved.get("epochs"), "steps_per_epoch": resolved.get("steps_per_epoch"),
-                           "batch_size": cfg.get("batch_size"), "aug_loops": cfg.get("aug_loops")}
-    history = run_dir / "history.csv"
-    if history.is_file():
-        with history.open(newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
-        if rows and "val_loss" in rows[-1]:
-            out["val_mse"] = float(rows[-1]["val_loss"])
-    return out
+    return training_summary(run_dir).get("seconds")
 
 
 def _fmt_budget(train: dict[str, Any]) -> str:
@@ -173,9 +176,10 @@ def run(args: argparse.Namespace) -> int:
         results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
         model = Path(results["meta"]["model"])
         log.info("measuring the deployment latency of %s", model)
+        training = training_summary(run_dir)
         columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),
                         "model_sha256": results["meta"]["model_sha256"], "summary": results["summary"],
-                        "training_time_s": training_time_s(run_dir), "training": training_summary(run_dir),
+                        "training_time_s": training.get("seconds"), "training": training,
                         "latency": measure_latency(model, args.frames)})
     table = build_table(columns, with_paper=not args.no_paper)
     args.out.parent.mkdir(parents=True, exist_ok=True)

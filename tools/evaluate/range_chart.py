@@ -11,17 +11,11 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from models.runfiles import atomic_path
+from tools.evaluate.compare import PAPER_TABLE10_RANGES
 from tools.evaluate.experiments import EXPERIMENTS
 
 log = logging.getLogger(__name__)
-
-#: The paper's Table 10 ranges as numbers (offsets from the default), for the chart.
-PAPER_TABLE10_RANGES: dict[str, dict[str, tuple[float, float]]] = {
-    "NVIDIA's approach (paper)": {"light_intensity": (-0.2, 0.3), "light_direction": (-3.0, 7.0),
-                                  "orientation": (-20.0, 10.0)},
-    "Our approach (paper)": {"light_intensity": (-0.6, 1.2), "light_direction": (-30.0, 30.0),
-                             "orientation": (-45.0, 10.0)},
-}
 
 
 def measured_range(entry: dict[str, Any] | None) -> tuple[float, float, bool, bool] | None:
@@ -86,9 +80,7 @@ def plot_ranges(columns: list[dict[str, Any]], path: Path, with_paper: bool = Tr
     fig.suptitle("Ranges with no intervention (arrow: the search reached its cap; dashed: caps; hatched: paper)",
                  fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    fig.savefig(tmp)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
-    tmp.replace(path)
     return path

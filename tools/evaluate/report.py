@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import json
 import logging
-import os
 from pathlib import Path
 from typing import Any
 
@@ -13,22 +11,18 @@ from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, PAPER_TABLE9,
 log = logging.getLogger(__name__)
 
 
-def write_json(path: Path, data: Any) -> None:
-    """Atomic JSON write (temp file, then rename), so an interrupted run never leaves half a file."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=str), encoding="utf-8")
-    os.replace(tmp, path)
-
-
-def write_text(path: Path, text: str) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-
-
 def _signed(x: float, unit: str) -> str:
     text = f"{x:+.1f}" if unit == "cd" else f"{x:+.0f}"
     return text + ("°" if unit == "°" else "")
+
+
+def _range_text(lower: str, upper: str, unit: str) -> str:
+    return f"[{lower}, {upper}]" + (" cd" if unit == "cd" else "")
+
+
+def format_range(lower: float, upper: float, unit: str) -> str:
+    """A range of offsets in the paper's notation, e.g. ``[-0.2, +0.3] cd`` or ``[-20°, +10°]``."""
+    return _range_text(_signed(lower, unit), _signed(upper, unit), unit)
 
 
 def format_cell(entry: dict[str, Any] | None) -> str:
@@ -55,8 +49,7 @@ def format_cell(entry: dict[str, Any] | None) -> str:
             text = _signed(side["limit"] - entry["origin"], unit)
             return f"{mark}{text}" if side.get("hit_cap") else text
 
-        suffix = " cd" if unit == "cd" else ""
-        return f"[{bound(lo, '≤')}, {bound(hi, '≥')}]{suffix}"
+        return _range_text(bound(lo, "≤"), bound(hi, "≥"), unit)
     up = entry.get("upper", {})
     if not up or up.get("limit") is None:
         return f"< {entry['origin']:.0f} {unit}"

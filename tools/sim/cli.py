@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from pathlib import Path
 
@@ -172,8 +171,9 @@ def run(args: argparse.Namespace) -> int:
             video.close()
     print_summary(result, note)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+        from models.runfiles import write_json
+
+        write_json(args.json, result.to_dict())
         print(f"json  {args.json}")
     if args.map:
         from tools.sim.viz import write_trajectory_map
