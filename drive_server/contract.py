@@ -12,6 +12,8 @@ import logging
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+from protocol.facts import FRAME_HEIGHT
+
 log = logging.getLogger(__name__)
 
 #: ONNX ``metadata_props`` key holding the JSON-encoded contract.
@@ -41,7 +43,7 @@ class PreprocessContract:
     width: int = 64
     height: int = 64
     crop_top: int = 0
-    crop_bottom: int = 160
+    crop_bottom: int = FRAME_HEIGHT
     color: str = "rgb"
     scale: float = 1.0 / 255.0
     offset: float = -0.5
@@ -56,8 +58,8 @@ class PreprocessContract:
             raise ContractError(f"layout must be one of {_LAYOUTS}, not {self.layout!r}")
         if self.interpolation not in _INTERPOLATIONS:
             raise ContractError(f"interpolation must be one of {_INTERPOLATIONS}, not {self.interpolation!r}")
-        if not (0 <= self.crop_top < self.crop_bottom <= 160):
-            raise ContractError(f"crop rows [{self.crop_top}, {self.crop_bottom}) outside 0..160")
+        if not (0 <= self.crop_top < self.crop_bottom <= FRAME_HEIGHT):
+            raise ContractError(f"crop rows [{self.crop_top}, {self.crop_bottom}) outside 0..{FRAME_HEIGHT}")
         if self.width < 8 or self.height < 8:
             raise ContractError(f"input size {self.width}x{self.height} is too small")
 
@@ -94,7 +96,7 @@ class PreprocessContract:
 #: The paper's preprocessing (section 3.1.5): 64x64, RGB, x/255 - 0.5.
 PAPER_CONTRACT = PreprocessContract()
 #: NVIDIA's approach for PilotNet: crop rows 60..160, YUV, 200x66, x/255.
-NVIDIA_CONTRACT = PreprocessContract(width=200, height=66, crop_top=60, crop_bottom=160, color="yuv",
+NVIDIA_CONTRACT = PreprocessContract(width=200, height=66, crop_top=60, crop_bottom=FRAME_HEIGHT, color="yuv",
                                      scale=1.0 / 255.0, offset=0.0)
 
 

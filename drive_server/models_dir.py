@@ -5,6 +5,8 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from protocol.facts import BEHAVIORS
+
 PRETRAINED_PACKAGE = "models.pretrained"
 DEFAULT_MODEL_NAME = "simplistic.onnx"
 
@@ -13,7 +15,6 @@ def default_model_path() -> Path:
     """Path of the bundled simplistic model (it may not exist yet: the caller checks)."""
     return Path(str(resources.files(PRETRAINED_PACKAGE) / DEFAULT_MODEL_NAME))
 
-BEHAVIORS = ("simplistic", "rigorous", "collision")
 
 
 def bundled_model_path(behavior: str = "simplistic") -> Path:

@@ -11,9 +11,8 @@ import cv2
 import numpy as np
 
 from drive_server.contract import PreprocessContract
+from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
-FULL_WIDTH = 320
-FULL_HEIGHT = 160
 _INTERP = {"area": cv2.INTER_AREA, "linear": cv2.INTER_LINEAR}
 
 
@@ -27,7 +26,7 @@ def jpeg_reduction(contract: PreprocessContract) -> int:
     """
     crop_h = contract.crop_bottom - contract.crop_top
     for r in (8, 4, 2):
-        if FULL_WIDTH // r >= contract.width and crop_h // r >= contract.height and contract.crop_top % r == 0 \
+        if FRAME_WIDTH // r >= contract.width and crop_h // r >= contract.height and contract.crop_top % r == 0 \
                 and contract.crop_bottom % r == 0:
             return r
     return 1
@@ -37,7 +36,7 @@ def frame_to_network_image(rgb: np.ndarray, contract: PreprocessContract) -> np.
     """Crop, resize and colour-convert one RGB frame (any decode scale) to the network's size, uint8."""
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"expected an RGB image (H, W, 3), got shape {rgb.shape}")
-    scale = rgb.shape[0] / FULL_HEIGHT
+    scale = rgb.shape[0] / FRAME_HEIGHT
     top, bottom = round(contract.crop_top * scale), round(contract.crop_bottom * scale)
     if top or bottom != rgb.shape[0]:
         rgb = rgb[top:bottom]

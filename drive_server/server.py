@@ -22,7 +22,8 @@ from typing import Any
 from drive_server.guard import FallbackPolicy, FrameGuard
 from drive_server.model import SteeringModel
 from drive_server.pipeline import DrivePipeline, InferenceError
-from drive_server.stats import LatencyStats, save_stats, summarize, summary_line, write_json_atomic
+from drive_server.runrecords import write_json
+from drive_server.stats import LatencyStats, save_stats, summarize, summary_line
 from drive_server.transport import TransportTuning, install
 from protocol import ProtocolError, encode_steer, parse_telemetry
 
@@ -232,7 +233,7 @@ class DriveServer:
         if self.config.stats_dump is not None:
             save_stats(self.config.stats_dump, self.all_stats())
         if self.config.stats_json is not None:
-            write_json_atomic(self.config.stats_json, self.stats_document())
+            write_json(self.config.stats_json, self.stats_document(), sort_keys=True)
 
     def _log_loop(self) -> None:
         """Every ``log_every_s``: counters since start, percentiles of the frames since the last line."""

@@ -9,13 +9,13 @@ frames since a given one (the periodic log line, so it stays cheap and describes
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from drive_server.runrecords import atomic_path
 
 #: Pipeline stages, in order; ``total`` is handler entry to reply queued.
 STAGES = ("decode", "preprocess", "inference", "control", "total")
@@ -72,9 +72,8 @@ def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
         arrays[f"s{i}"] = s.samples()
         meta.append({"name": s.name, "frames": s.frames, "manual": s.manual, "malformed": s.malformed})
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp, tmp.open("wb") as fh:  # a file object: np.savez would add ".npz" to a name
+        np.savez(fh, **arrays)
 
 
 def load_stats(path: Path) -> list[LatencyStats]:
@@ -121,18 +120,3 @@ def summary_line(summary: dict[str, Any]) -> str:
         return head
     return head + " | p50/p99 ms " + " ".join(
         f"{name} {stages[name]['p50']:.3f}/{stages[name]['p99']:.3f}" for name in STAGES)
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON next to ``path`` then rename over it, so a reader never sees half a file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2, sort_keys=True)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

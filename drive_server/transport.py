@@ -26,7 +26,7 @@ import socket
 from dataclasses import dataclass, replace
 from typing import Any
 
-import numpy as np
+from protocol.websocket import xor_mask
 
 log = logging.getLogger(__name__)
 
@@ -49,20 +49,8 @@ class TransportTuning:
 
 
 def fast_apply_mask(data: bytes, mask: Any, length: int | None = None, offset: int = 0) -> bytes:
-    """Drop-in for ``eventlet.websocket.RFC6455WebSocket._apply_mask``: XOR ``data`` with the 4-byte
-    ``mask`` starting at mask position ``offset`` (a frame may arrive in several recv chunks)."""
-    if length is None:
-        length = len(data)
-    rot = offset & 3
-    key = bytes(mask[rot:4]) + bytes(mask[:rot])
-    out = bytearray(length)
-    n4 = length >> 2
-    if n4:
-        np.bitwise_xor(np.frombuffer(data, np.uint32, n4), np.frombuffer(key, np.uint32)[0],
-                       out=np.frombuffer(out, np.uint32, n4))
-    for i in range(n4 << 2, length):
-        out[i] = data[i] ^ key[i & 3]
-    return bytes(out)
+    """Drop-in for ``eventlet.websocket.RFC6455WebSocket._apply_mask`` (same signature), vectorised."""
+    return xor_mask(data, mask, length, offset)
 
 
 def _version_tuple(version: str) -> tuple[int, int]:

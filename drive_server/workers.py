@@ -28,8 +28,9 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.model import SteeringModel
+from drive_server.runrecords import write_json
 from drive_server.server import DriveServer, ServerConfig, stats_document
-from drive_server.stats import load_stats, summarize, summary_line, write_json_atomic
+from drive_server.stats import load_stats, summarize, summary_line
 from drive_server.transport import TransportTuning
 
 log = logging.getLogger(__name__)
@@ -113,7 +114,7 @@ def serve_workers(workers: int, sock: socket.socket, model: SteeringModel, confi
                  for s in load_stats(Path(tmp.name) / f"worker{i}.npz")]
         log.info("stopped: %s", summary_line(summarize(stats)))
         if config.stats_json is not None:
-            write_json_atomic(config.stats_json, stats_document(model, transport, stats, workers=workers))
+            write_json(config.stats_json, stats_document(model, transport, stats, workers=workers), sort_keys=True)
         tmp.cleanup()
     return code
 

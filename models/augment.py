@@ -15,11 +15,9 @@ import cv2
 import numpy as np
 
 from models import geometry
+from protocol.facts import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG
 
-FULL_W, FULL_H = 320, 160
-MAX_STEERING_DEG = 25.0
 CENTER, LEFT, RIGHT = 0, 1, 2
-CAMERAS = ("center", "left", "right")
 
 
 @dataclass(frozen=True)
@@ -36,8 +34,8 @@ class AugmentSpec:
     gamma: float = 0.95 / 10.0  # inter-camera distance / recovery distance (Eq. 4/5)
     shadow_count: int = 4
     shadow_darkness: float = 0.65
-    shadow_x: tuple[int, int] = (0, FULL_W)
-    shadow_y: tuple[int, int] = (FULL_H // 2, FULL_H)
+    shadow_x: tuple[int, int] = (0, FRAME_WIDTH)
+    shadow_y: tuple[int, int] = (FRAME_HEIGHT // 2, FRAME_HEIGHT)
     brightness_range: float = 100.0
     pan_range: float = 0.05  # fraction of width/height
     tilt_range_deg: float = 1.0
@@ -126,7 +124,7 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
     label = np.where(flip, -label, label) + 0.0  # no -0.0 labels
 
     pan = rng.random(n) < spec.pan
-    pan_xy = rng.uniform(-spec.pan_range, spec.pan_range, (n, 2)) * np.array([FULL_W, FULL_H])
+    pan_xy = rng.uniform(-spec.pan_range, spec.pan_range, (n, 2)) * np.array([FRAME_WIDTH, FRAME_HEIGHT])
 
     tilt = rng.random(n) < spec.tilt
     tilt_deg = rng.uniform(-spec.tilt_range_deg, spec.tilt_range_deg, n)

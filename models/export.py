@@ -19,9 +19,9 @@ import onnxruntime as ort
 import torch
 from torch import nn
 
+from drive_server import runrecords
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.preprocess import to_input_tensor
-from models import runfiles
 from models.nets import ContractInput
 
 log = logging.getLogger(__name__)
@@ -42,7 +42,7 @@ def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, An
     model = ContractInput(net, contract.layout).eval()
     dummy = torch.zeros(contract.input_shape, dtype=torch.float32)
     path = Path(path)
-    with runfiles.atomic_path(path) as tmp:
+    with runrecords.atomic_path(path) as tmp:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the TorchScript exporter is deprecated but needs no onnxscript
             torch.onnx.export(model, (dummy,), str(tmp), dynamo=False, opset_version=OPSET,

@@ -35,8 +35,9 @@ import numpy as np
 from drive_server.contract import PreprocessContract
 from drive_server.preprocess import to_input_tensor
 from models import geometry
-from models.augment import CENTER, FULL_H, FULL_W, LEFT, RIGHT, AugmentSpec, AugParams, draw_params
+from models.augment import CENTER, LEFT, RIGHT, AugmentSpec, AugParams, draw_params
 from models.framecache import FrameCache
+from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
 _SUBPIXEL_BITS = 4
 
@@ -52,7 +53,7 @@ class FastAugmenter:
         self.size = (c.width, c.height)
         # network corner coordinates -> full-resolution corner coordinates
         crop_h = c.crop_bottom - c.crop_top
-        self._to_full = geometry.translate(0.0, c.crop_top) @ geometry.scale(FULL_W / c.width, crop_h / c.height)
+        self._to_full = geometry.translate(0.0, c.crop_top) @ geometry.scale(FRAME_WIDTH / c.width, crop_h / c.height)
         self._from_full = np.linalg.inv(self._to_full)
         slot = {name: i for i, name in enumerate(cache.cameras)}
         self._slot = np.full(3, -1, np.int64)
@@ -72,11 +73,11 @@ class FastAugmenter:
     def chain(self, params: AugParams, which: np.ndarray) -> np.ndarray:
         """Pullbacks (k, 3, 3), full-res corner coordinates, of flip, pan, shift and tilt, in that order."""
         n = len(which)
-        flip = np.where(params.flip[which, None, None], geometry.flip_pullback(FULL_W), np.eye(3))
-        pan = geometry.pan_pullbacks(FULL_W, FULL_H, params.pan_xy[which, 0], params.pan_xy[which, 1])
+        flip = np.where(params.flip[which, None, None], geometry.flip_pullback(FRAME_WIDTH), np.eye(3))
+        pan = geometry.pan_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, params.pan_xy[which, 0], params.pan_xy[which, 1])
         shift = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         shift[:, 0, 2] = -params.shift_px[which]
-        tilt = geometry.tilt_pullbacks(FULL_W, FULL_H, params.tilt_deg[which])
+        tilt = geometry.tilt_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, params.tilt_deg[which])
         return flip @ pan @ shift @ tilt
 
     def images(self, idx: np.ndarray, params: AugParams) -> np.ndarray:
@@ -93,7 +94,7 @@ class FastAugmenter:
         t = self.lap("gather+mirror", t)
         shadowed = np.flatnonzero(params.shadow)
         # output network corner coordinates -> source full-resolution corner coordinates, per shadowed sample
-        to_full = np.where(params.flip[shadowed, None, None], geometry.flip_pullback(FULL_W) @ self._to_full,
+        to_full = np.where(params.flip[shadowed, None, None], geometry.flip_pullback(FRAME_WIDTH) @ self._to_full,
                            self._to_full)
         warped = np.flatnonzero(geometric)
         if len(warped):

@@ -14,38 +14,29 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from drive_server.contract import PreprocessContract
-from drive_server.preprocess import FULL_HEIGHT, FULL_WIDTH, frame_to_network_image, jpeg_reduction
-from models.augment import CAMERAS
-from models.datalog import Sample
+from drive_server.preprocess import frame_to_network_image, jpeg_reduction
+from protocol.datalog import Sample
+from protocol.errors import ProtocolError
+from protocol.facts import CAMERAS
+from protocol.jpeg import read_jpeg_file
 
 log = logging.getLogger(__name__)
-
-_FLAGS = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
-          8: cv2.IMREAD_REDUCED_COLOR_8}
-
 
 class FrameError(ValueError):
     """A frame file could not be decoded as a 320x160 image."""
 
 
 def load_frame(path: Path, reduce: int = 1) -> np.ndarray:
-    """Decode an image file to RGB uint8 at 1/``reduce`` size (as the drive server decodes telemetry)."""
+    """Decode an image file to RGB uint8 at 1/``reduce`` size: THE decode the drive server uses."""
     try:
-        data = np.fromfile(str(path), dtype=np.uint8)
+        return read_jpeg_file(path, reduce)
     except OSError as exc:
-        raise FrameError(f"{path}: {exc.strerror}") from None
-    bgr = cv2.imdecode(data, _FLAGS[reduce]) if data.size else None
-    if bgr is None:
-        raise FrameError(f"{path}: not a decodable image")
-    expected = (FULL_HEIGHT // reduce, FULL_WIDTH // reduce)
-    if bgr.shape[:2] != expected:
-        raise FrameError(f"{path}: expected {FULL_WIDTH}x{FULL_HEIGHT}, got {bgr.shape[1] * reduce}x"
-                         f"{bgr.shape[0] * reduce}")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        raise FrameError(f"{path}: {exc.strerror or exc}") from None
+    except ProtocolError as exc:
+        raise FrameError(str(exc)) from None
 
 
 @dataclass

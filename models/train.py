@@ -22,13 +22,15 @@ import cv2
 import torch
 from torch import nn
 
+from drive_server import runrecords
 from drive_server.preprocess import to_input_tensor
 from models import runfiles
 from models.batches import Prefetcher, TrainingSet, epoch_batches
-from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipeline, pipeline_for
+from models.behavior import Pipeline, pipeline_for
 from models.export import export_onnx
 from models.fastaug import FastAugmenter, training_contract
 from models.nets import build_model, count_parameters
+from models.train_config import TrainConfig
 from models.trainingdata import PreparedData, prepare_data
 
 log = logging.getLogger(__name__)
@@ -42,34 +44,7 @@ class RunDirError(RuntimeError):
 
 
 @dataclass
-class TrainConfig:
-    """Everything that determines a run. ``None`` means the paper's value for the behavior."""
-
-    data: list[str]
-    out: str
-    behavior: str = "simplistic"
-    arch: str = "shallow"
-    approach: str = "ours"
-    epochs: int | None = None
-    aug_loops: int = AUGMENTATION_LOOPS
-    batch_size: int = BATCH_SIZE
-    learning_rate: float = LEARNING_RATE
-    seed: int = 0
-    max_steps_per_epoch: int | None = None
-    val_fraction: float = 0.2
-    # execution only (do not change results beyond float noise)
-    threads: int | None = None
-    decode_workers: int | None = None
-    progress: bool = True
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        known = set(cls.__dataclass_fields__)
-        return cls(**{k: v for k, v in data.items() if k in known})
-
-
-@dataclass
-class RunResult:
+class TrainResult:
     run_dir: Path
     history: list[dict[str, float]]
     onnx: Path | None
@@ -107,7 +82,7 @@ def default_threads(arch: str = "shallow") -> int:
     return cores if arch == "pilotnet" else max(1, cores - 1)
 
 
-def train(config: TrainConfig, resume: bool = False) -> RunResult:
+def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     run_dir = Path(config.out)
     config = _resolve_config(config, run_dir, resume)
     pipeline = pipeline_for(config.behavior, config.arch, config.approach)
@@ -129,7 +104,7 @@ def train(config: TrainConfig, resume: bool = False) -> RunResult:
         state = _load_checkpoint(checkpoint, model, optimizer)
         log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
     else:
-        runfiles.write_json(run_dir / runfiles.CONFIG, _config_record(config, pipeline, data, epochs, steps))
+        runrecords.write_json(run_dir / runfiles.CONFIG, _config_record(config, pipeline, data, epochs, steps))
 
     augmenter = FastAugmenter(data.cache, pipeline.augment)
     tset = TrainingSet(data.train, data.steering[data.train], data.has_sides[data.train], pipeline.deletion_rate,
@@ -146,7 +121,7 @@ def train(config: TrainConfig, resume: bool = False) -> RunResult:
             if stop.requested and state.step < steps:
                 log.warning("interrupted at epoch %d step %d: checkpoint saved; continue with --resume",
                             state.epoch + 1, state.step)
-                return RunResult(run_dir, state.history, None, None, None, interrupted=True,
+                return TrainResult(run_dir, state.history, None, None, None, interrupted=True,
                                  samples_per_s=trained * config.batch_size / (time.perf_counter() - wall))
             val_loss = evaluate(model, data, pipeline, config.batch_size)
             state.history.append({"epoch": state.epoch + 1, "train_loss": state.loss_sum / max(1, state.loss_count),
@@ -158,7 +133,7 @@ def train(config: TrainConfig, resume: bool = False) -> RunResult:
             _save_checkpoint(checkpoint, model, optimizer, state, config)
             if stop.requested and state.epoch < epochs:
                 log.warning("interrupted after epoch %d: checkpoint saved; continue with --resume", state.epoch)
-                return RunResult(run_dir, state.history, None, None, None, interrupted=True)
+                return TrainResult(run_dir, state.history, None, None, None, interrupted=True)
     rate = trained * config.batch_size / max(1e-9, time.perf_counter() - wall)
     return _finish(model, data, pipeline, config, state, run_dir, rate)
 
@@ -220,15 +195,15 @@ def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: 
 
 
 def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: TrainConfig, state: _State,
-            run_dir: Path, rate: float) -> RunResult:
+            run_dir: Path, rate: float) -> TrainResult:
     val_loss = state.history[-1]["val_loss"] if state.history else float("nan")
     info = {"arch": config.arch, "behavior": config.behavior, "approach": config.approach, "val_mse": val_loss,
             "epochs": len(state.history), "train_samples": int(len(data.train)), "seed": config.seed,
-            "parameters": count_parameters(model), "code_version": runfiles.code_version()}
+            "parameters": count_parameters(model), "code_version": runrecords.code_version()}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = run_dir / runfiles.MODEL
     diff = export_onnx(model.eval(), pipeline.contract, info, path, frames)
-    return RunResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate, info=info)
+    return TrainResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate, info=info)
 
 
 def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
@@ -270,7 +245,7 @@ def _config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, 
         "logs": [{"path": str(r.log), "rows": r.rows, "samples": r.used, "skipped": len(r.skipped)}
                  for r in data.dataset.reports],
         "unreadable_frames": len(data.cache.errors),
-        "code_version": runfiles.code_version(),
+        "code_version": runrecords.code_version(),
         "torch": torch.__version__,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
@@ -280,7 +255,7 @@ def _save_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimi
                      config: TrainConfig) -> None:
     payload = {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "state": asdict(state),
                "torch_rng": torch.get_rng_state(), "config": asdict(config)}
-    runfiles.write_bytes(path, lambda tmp: torch.save(payload, tmp))
+    runrecords.write_bytes(path, lambda tmp: torch.save(payload, tmp))
 
 
 def _load_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer) -> _State:

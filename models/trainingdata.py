@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from models.behavior import Pipeline
-from models.datalog import DataLogError, DataSet, read_logs
 from models.framecache import FrameCache, build_cache
 from models.split import split_indices
+from protocol.datalog import DataLogError, DataSet, read_logs
 
 log = logging.getLogger(__name__)
 

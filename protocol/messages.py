@@ -7,21 +7,11 @@ makes it throw silently and stall.
 
 from __future__ import annotations
 
-import base64
-import binascii
 import math
 from dataclasses import dataclass
 from typing import Any
 
-import cv2
-import numpy as np
-
 from protocol.errors import ProtocolError
-
-FRAME_WIDTH = 320
-FRAME_HEIGHT = 160
-MAX_STEERING_DEG = 25.0
-_JPEG_MAGIC = b"\xff\xd8"
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,38 +116,3 @@ def encode_telemetry(
 
     return {"steering_angle": f(steering_angle_deg), "throttle": f(throttle), "speed": f(speed),
             "image": image_b64}
-
-
-def decode_image(image_b64: str, reduce: int = 1) -> np.ndarray:
-    """Decode a base64 JPEG to an RGB ``uint8`` array (H, W, 3).
-
-    ``reduce`` in (1, 2, 4, 8) asks libjpeg to decode at 1/reduce size directly, which is
-    cheaper than decoding full size and resizing.
-    """
-    try:
-        raw = base64.b64decode(image_b64, validate=False)
-    except (binascii.Error, ValueError) as exc:
-        raise ProtocolError(f"image: invalid base64 ({exc})") from None
-    if not raw.startswith(_JPEG_MAGIC) and not raw.startswith(b"\x89PNG"):
-        raise ProtocolError(f"image: not a JPEG (starts with {raw[:4]!r}, {len(raw)} bytes)")
-    flags = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
-             8: cv2.IMREAD_REDUCED_COLOR_8}
-    if reduce not in flags:
-        raise ValueError(f"reduce must be 1, 2, 4 or 8, not {reduce}")
-    bgr = cv2.imdecode(np.frombuffer(raw, np.uint8), flags[reduce])
-    if bgr is None:
-        raise ProtocolError(f"image: corrupt JPEG ({len(raw)} bytes)")
-    expected = (FRAME_HEIGHT // reduce, FRAME_WIDTH // reduce)
-    if bgr.shape[:2] != expected:
-        raise ProtocolError(
-            f"image: expected {FRAME_WIDTH}x{FRAME_HEIGHT}, got {bgr.shape[1] * reduce}x{bgr.shape[0] * reduce}"
-        )
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-
-
-def encode_image(rgb: np.ndarray, quality: int = 75) -> str:
-    """Encode an RGB frame as base64 JPEG (quality 75, like Unity's ``EncodeToJPG``)."""
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, quality])
-    if not ok:
-        raise ProtocolError("image: JPEG encoding failed")
-    return base64.b64encode(buf.tobytes()).decode("ascii")

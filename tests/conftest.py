@@ -31,6 +31,6 @@ def write_stadium(folder: Path, lanes: int = 1, road_width: float = 8.0, straigh
 def shallow_onnx(tmp_path_factory) -> Path:
     """The paper's shallow CNN with random weights, contract metadata included."""
     pytest.importorskip("onnx")
-    from tools.onnx_builders import save_model
+    from tools.bench.onnx_builders import save_model
 
     return save_model("shallow", tmp_path_factory.mktemp("models") / "shallow.onnx")

@@ -16,7 +16,7 @@ SAMPLE_LOG = REPO / "tests" / "data" / "udacity-sample"
 
 def build_shallow(path: Path, **kwargs) -> Path:
     """The paper's shallow CNN with random weights (14,065 parameters, ~57 KB)."""
-    from tools.onnx_builders import save_model
+    from tools.bench.onnx_builders import save_model
 
     return save_model("shallow", path, **kwargs)
 

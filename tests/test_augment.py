@@ -14,9 +14,9 @@ from drive_server.preprocess import frame_to_network_image
 from models import augment, geometry
 from models.augment import CAMERAS, CENTER, LEFT, RIGHT, AugmentSpec, augment_reference, draw_params
 from models.behavior import BEHAVIORS, NVIDIA_AUGMENT, Behavior
-from models.datalog import read_log
 from models.fastaug import FastAugmenter, augment_batch
 from models.framecache import FrameCache, build_cache, load_frame
+from protocol.datalog import read_log
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 NONE = dict(perspective=0.0, shadow=0.0, brightness=0.0, flip=0.0, pan=0.0, tilt=0.0)

@@ -9,13 +9,13 @@ import pytest
 from helpers_server import SAMPLE_LOG, build_shallow
 
 from tools.cli import main as rbc
-from tools.server_process import ServerProcess
+from tools.wire.server_process import ServerProcess
 
 onnx = pytest.importorskip("onnx", reason="the benchmark models are built with the onnx package")
 ort = pytest.importorskip("onnxruntime")
 
 from drive_server.contract import METADATA_KEY, PreprocessContract  # noqa: E402
-from tools.onnx_builders import ARCHS, PILOTNET, SHALLOW, build_model, count_parameters  # noqa: E402
+from tools.bench.onnx_builders import ARCHS, PILOTNET, SHALLOW, build_model, count_parameters  # noqa: E402
 
 
 @pytest.mark.parametrize(("arch", "params"), [(SHALLOW, 14_065), (PILOTNET, 252_219)])
@@ -78,6 +78,6 @@ def test_rbc_bench_without_onnx_says_what_to_do(monkeypatch, caplog):
     import sys
 
     monkeypatch.setitem(sys.modules, "onnx", None)  # as if the train extra were not installed
-    monkeypatch.delitem(sys.modules, "tools.onnx_builders", raising=False)
+    monkeypatch.delitem(sys.modules, "tools.bench.onnx_builders", raising=False)
     assert rbc(["bench", "--frames", "1"]) == 2
     assert "--model" in caplog.text and "onnx" in caplog.text

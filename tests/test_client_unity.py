@@ -10,8 +10,9 @@ import pytest
 from helpers_server import SAMPLE_LOG
 
 from protocol import FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG, decode_image, parse_telemetry
-from tools.frames import cycle_payloads, log_frames, synthetic_frames
-from tools.unity_client import UnityWireClient, _frame, _json_string, mask_payload
+from tools.wire.frames import cycle_payloads, log_frames, synthetic_frames
+from protocol.websocket import xor_mask as mask_payload
+from tools.wire.unity_client import UnityWireClient, _frame, _json_string
 
 
 def unmask_reference(data: bytes, mask: bytes) -> bytes:

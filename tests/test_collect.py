@@ -25,9 +25,9 @@ def _config(track: str, **kw) -> CollectConfig:
 
 def _read(out: Path):
     try:
-        from models.datalog import read_log
+        from protocol.datalog import read_log
     except ImportError:  # the training package is optional here
-        pytest.skip("models.datalog is not available")
+        pytest.skip("protocol.datalog is not available")
     samples, report = read_log(out)
     assert not report.skipped, report.summary()
     return samples

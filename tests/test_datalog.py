@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from models.datalog import DataLogError, read_log, read_logs
+from protocol.datalog import DataLogError, read_log, read_logs
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 FRAMES = sorted((SAMPLE / "IMG").glob("center_*.jpg"))

@@ -5,7 +5,7 @@ import subprocess
 import sys
 
 from tests.conftest import write_stadium
-from tools.server_process import ServerProcess
+from tools.wire.server_process import ServerProcess
 
 
 def test_eval_over_the_socket_writes_results_and_table(tmp_path, shallow_onnx):

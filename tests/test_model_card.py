@@ -2,7 +2,7 @@
 
 import json
 
-from tools.model_card import card
+from tools.commands.model_card import card
 
 
 def _run(tmp_path, arch, approach):

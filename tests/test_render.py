@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tools.sim.render import IMG_H, IMG_W, Renderer
+from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
+from tools.sim.render import Renderer
 from tools.sim.track import Track, parse_track, place_cones
 from tools.sim.world import Pose, World, clear_caches, get_world, sun_for
 
@@ -43,7 +44,7 @@ def on_straight(offset: float = 0.0, x: float = 20.0) -> Pose:
 
 def ground(img: np.ndarray, near_rows: int = 60) -> np.ndarray:
     """The nearest ``near_rows`` rows of ground (well below the horizon)."""
-    return img[IMG_H - near_rows:].astype(np.int32)
+    return img[FRAME_HEIGHT - near_rows:].astype(np.int32)
 
 
 def road_centre(img: np.ndarray) -> float:
@@ -60,7 +61,7 @@ def asphalt_mask(img: np.ndarray) -> np.ndarray:
 
 def test_frame_format_and_camera_names(bare: Renderer):
     img = bare.render(on_straight())
-    assert img.shape == (IMG_H, IMG_W, 3) and img.dtype == np.uint8 and img.flags.c_contiguous
+    assert img.shape == (FRAME_HEIGHT, FRAME_WIDTH, 3) and img.dtype == np.uint8 and img.flags.c_contiguous
     with pytest.raises(ValueError, match="unknown camera 'roof'"):
         bare.render(on_straight(), camera="roof")
     assert set(bare.render_all(on_straight())) == {"left", "center", "right"}
@@ -70,7 +71,7 @@ def test_straight_road_is_left_right_symmetric(bare: Renderer):
     img = bare.render(on_straight())
     g = ground(img)
     road = asphalt_mask(g)
-    assert road[:, IMG_W // 2].all()  # the centre column sees road all the way down
+    assert road[:, FRAME_WIDTH // 2].all()  # the centre column sees road all the way down
     mirrored = road[:, ::-1]
     agree = (road == mirrored).mean()
     assert agree > 0.97, f"road mask only {agree:.3f} symmetric"
@@ -119,7 +120,7 @@ def test_light_direction_moves_shadows(wooded: Track):
     pose = on_straight(x=60.0)
     a = Renderer(get_world(wooded, 0.0)).render(pose)
     b = Renderer(get_world(wooded, 20.0)).render(pose)
-    rows = slice(IMG_H // 2 + 10, IMG_H)
+    rows = slice(FRAME_HEIGHT // 2 + 10, FRAME_HEIGHT)
     diff = np.abs(a[rows].astype(int) - b[rows].astype(int)).max(-1)
     assert (diff > 25).mean() > 0.02  # shadows moved somewhere on the ground
     sun0, sun1 = sun_for(wooded, 0.0), sun_for(wooded, 20.0)
@@ -135,7 +136,7 @@ def test_cones_are_drawn_on_their_half_of_the_road():
     changed = np.abs(with_cone.astype(int) - without.astype(int)).max(-1) > 30
     ys, xs = np.nonzero(changed)
     assert len(xs) > 40  # a 0.9 m cone 10 m ahead covers a visible patch
-    assert xs.mean() < IMG_W / 2 - 10  # left of the image centre
+    assert xs.mean() < FRAME_WIDTH / 2 - 10  # left of the image centre
     orange = with_cone[ys, xs].astype(int)
     assert ((orange[:, 0] > 150) & (orange[:, 2] < 100)).any()
 
@@ -150,7 +151,7 @@ def test_place_cones_block_the_rendered_road():
     rgb = img.astype(int)
     orange = (rgb[..., 0] > 170) & (rgb[..., 1] < 140) & (rgb[..., 2] < 90)
     assert orange.sum() > 20
-    side = np.nonzero(orange)[1].mean() - IMG_W / 2
+    side = np.nonzero(orange)[1].mean() - FRAME_WIDTH / 2
     assert np.sign(side) == -np.sign(p.cte)  # a cone on the left half shows left of centre
 
 
@@ -176,7 +177,7 @@ def test_bridge_looks_different_from_asphalt():
     def road_colour(s: float) -> np.ndarray:
         x, y, h = track.point_at(s)
         img = r.render(Pose(x, y, h))
-        return img[IMG_H - 25:, IMG_W // 2 - 30: IMG_W // 2 + 30].reshape(-1, 3).mean(0)
+        return img[FRAME_HEIGHT - 25:, FRAME_WIDTH // 2 - 30: FRAME_WIDTH // 2 + 30].reshape(-1, 3).mean(0)
 
     deck, asphalt = road_colour(85.0), road_colour(30.0)
     assert deck[0] - deck[2] > 30  # warm brown planks

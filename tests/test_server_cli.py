@@ -99,7 +99,8 @@ def test_port_in_use_exits_2(tmp_path):
 
 
 def test_deployment_imports_no_training_packages():
-    code = ("import sys, drive_server.cli, drive_server.server, tools.unity_client, tools.frames, tools.replay; "
+    code = ("import sys, drive_server.cli, drive_server.server, tools.wire.unity_client, tools.wire.frames, "
+            "tools.commands.replay; "
             "from drive_server.models_dir import default_model_path; default_model_path(); "
             "bad = sorted(m for m in ('torch', 'onnx', 'matplotlib') if m in sys.modules); print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)

@@ -14,9 +14,9 @@ import pytest
 from helpers_server import REPO, SAMPLE_LOG, build_shallow, jpeg_b64
 
 from protocol import SteerCommand, parse_steer
-from tools.frames import log_frames
-from tools.server_process import ServerProcess
-from tools.unity_client import ConnectionClosed, UnityWireClient
+from tools.wire.frames import log_frames
+from tools.wire.server_process import ServerProcess
+from tools.wire.unity_client import ConnectionClosed, UnityWireClient
 
 pytest.importorskip("onnx", reason="the tests build their ONNX model with the onnx package")
 pytestmark = pytest.mark.slow

@@ -1,4 +1,4 @@
-"""Latency statistics: ring buffer, percentiles, summary line, atomic JSON."""
+"""Latency statistics: ring buffer, percentiles, summary line, saved samples."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ from drive_server.stats import (
     save_stats,
     summarize,
     summary_line,
-    write_json_atomic,
 )
 
 
@@ -52,14 +51,6 @@ def test_summary_of_several_clients_and_counters():
     line = summary_line(out)
     assert "frames 1" in line and "malformed 3" in line and "total 1.000/1.000" in line
     assert summary_line(summarize([])) == "frames 0 manual 0 malformed 0"
-
-
-def test_write_json_atomic(tmp_path):
-    path = tmp_path / "sub" / "stats.json"
-    write_json_atomic(path, {"a": 1})
-    write_json_atomic(path, {"a": 2})
-    assert json.loads(path.read_text()) == {"a": 2}
-    assert [p.name for p in path.parent.iterdir()] == ["stats.json"]  # no temp file left behind
 
 
 def test_save_and_load_round_trip(tmp_path):

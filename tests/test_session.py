@@ -112,7 +112,7 @@ def test_scenario_config_validates():
 @pytest.fixture(scope="module")
 def random_model(tmp_path_factory) -> Path:
     pytest.importorskip("onnx", reason="building a random-weight ONNX model needs the onnx package")
-    from tools.onnx_builders import save_model
+    from tools.bench.onnx_builders import save_model
 
     return save_model("shallow", tmp_path_factory.mktemp("model") / "shallow_random.onnx", seed=3)
 

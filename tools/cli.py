@@ -1,8 +1,9 @@
-"""``rbc``: the project's one command line, with lazily imported subcommands.
+"""``rbc``: the project's one command line, dispatched on its first positional argument.
 
-Each subcommand lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
-the table below is the only place that lists them, and a module is imported only when its
-subcommand runs (so ``rbc bench`` works without torch installed).
+Each subcommand is one module of :mod:`tools.commands` exposing ``add_arguments(parser)`` and
+``run(args) -> int``; the table below is the only place that lists them. Only the module of the
+chosen subcommand is imported (so ``rbc bench`` works without torch installed), and the choice is
+the first argument that is not an option: ``rbc train --out sim`` trains, whatever the flags say.
 """
 
 from __future__ import annotations
@@ -12,6 +13,12 @@ import importlib
 import logging
 import sys
 from dataclasses import dataclass
+from types import ModuleType
+
+#: Options of ``rbc`` itself, allowed before the subcommand.
+GLOBAL_FLAGS = ("-v", "--verbose", "-h", "--help")
+#: Packages of the optional extras, by extra: a missing one is reported with its install line.
+EXTRA_PACKAGES = {"torch": "train", "onnx": "train", "tqdm": "train", "matplotlib": "plots"}
 
 
 @dataclass(frozen=True)
@@ -23,57 +30,89 @@ class Subcommand:
 
 
 SUBCOMMANDS: tuple[Subcommand, ...] = (
-    Subcommand("demo", "tools.demo", "start drive_server with the bundled model and drive one lap headless"),
-    Subcommand("sim", "tools.sim.cli", "drive laps of the headless simulator (over the socket or in-process)"),
-    Subcommand("collect", "tools.sim.collect_cli", "record a Udacity-format dataset with the autopilot"),
-    Subcommand("train", "models.train_cli", "balance, augment and train a model; export it to ONNX", "train"),
-    Subcommand("inspect", "models.inspect", "write analysis pictures of a training run", "train"),
-    Subcommand("augment-preview", "models.preview", "write a grid of augmented frames with labels", "plots"),
-    Subcommand("eval", "tools.evaluate.cli", "run the paper's robustness experiments on a model (Table 9)"),
-    Subcommand("compare", "tools.evaluate.compare", "side-by-side comparison of models (Table 10)"),
-    Subcommand("bench", "tools.bench", "round-trip latency benchmark of drive_server over the Unity wire"),
-    Subcommand("replay", "tools.replay", "replay a driving log to a drive server as the Unity simulator would"),
-    Subcommand("sim-bench", "tools.sim.bench", "frames/s of the headless renderer and lap wall time"),
-    Subcommand("train-bench", "models.bench", "augmentation and training throughput; projected paper run", "train"),
+    Subcommand("demo", "tools.commands.demo", "start drive_server with the bundled model and drive one lap headless"),
+    Subcommand("sim", "tools.commands.sim", "drive laps of the headless simulator (over the socket or in-process)"),
+    Subcommand("collect", "tools.commands.collect", "record a Udacity-format dataset with the autopilot"),
+    Subcommand("train", "tools.commands.train", "balance, augment and train a model; export it to ONNX", "train"),
+    Subcommand("inspect", "tools.commands.inspect_run", "write analysis pictures of a training run", "train"),
+    Subcommand("augment-preview", "tools.commands.augment_preview", "write a grid of augmented frames with labels",
+               "plots"),
+    Subcommand("eval", "tools.commands.eval", "run the paper's robustness experiments on a model (Table 9)"),
+    Subcommand("compare", "tools.commands.compare", "side-by-side comparison of models (Table 10)"),
+    Subcommand("bench", "tools.commands.bench", "round-trip latency benchmark of drive_server over the Unity wire"),
+    Subcommand("replay", "tools.commands.replay", "replay a driving log to a drive server as the Unity simulator would"),
+    Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),
+    Subcommand("train-bench", "tools.commands.train_bench", "augmentation and training throughput; projected paper run",
+               "train"),
+    Subcommand("model-card", "tools.commands.model_card", "write the model card of a bundled model from its run"),
 )
+BY_NAME = {c.name: c for c in SUBCOMMANDS}
 
 
-def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, Subcommand | None]:
+def find_subcommand(argv: list[str]) -> tuple[Subcommand | None, int]:
+    """The subcommand named by the first positional argument and its index (None, -1 if there is none).
+
+    Only ``rbc``'s own flags may come before it; an unknown name is left to argparse to report.
+    """
+    for i, arg in enumerate(argv):
+        if arg in GLOBAL_FLAGS:
+            continue
+        return BY_NAME.get(arg), i
+    return None, -1
+
+
+def top_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rbc",
         description="Robust behavioral cloning: collect, train, deploy and evaluate driving models.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    chosen = next((c for c in SUBCOMMANDS if c.name in argv), None)
     for cmd in SUBCOMMANDS:
-        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
-        if cmd is chosen:  # import only the module that runs
-            _load(cmd).add_arguments(p)
-    return parser, chosen
+        sub.add_parser(cmd.name, help=cmd.help, description=cmd.help, add_help=False)
+    return parser
 
 
-def _load(cmd: Subcommand):
+def load(cmd: Subcommand) -> ModuleType:
+    """Import a subcommand's module; a missing optional package exits with its install line."""
     try:
         return importlib.import_module(cmd.module)
     except ModuleNotFoundError as exc:
-        if exc.name and exc.name.split(".")[0] in {"torch", "onnx", "matplotlib", "tqdm"}:
-            hint = f'pip install "robust-behavioral-cloning[{cmd.extra or "train"}]"'
-            sys.exit(f"rbc {cmd.name}: needs the package {exc.name!r}; install it with: {hint}")
+        root = (exc.name or "").split(".")[0]
+        if root in EXTRA_PACKAGES:
+            extra = cmd.extra or EXTRA_PACKAGES[root]
+            sys.exit(f'rbc {cmd.name}: needs the package {root!r}; install it with: pip install -e ".[{extra}]"')
         raise
+
+
+def subcommand_parser(cmd: Subcommand, module: ModuleType) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=f"rbc {cmd.name}", description=cmd.help)
+    module.add_arguments(parser)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser, chosen = build_parser(argv)
-    args = parser.parse_args(argv)
+    cmd, index = find_subcommand(argv)
+    if cmd is None:
+        parser = top_parser()
+        if index < 0:
+            parser.parse_args(argv)  # -h prints the help and exits
+            parser.print_help()
+            return 2
+        parser.parse_args(argv[: index + 1])  # reports the unknown command and exits 2
+        return 2
+    verbose = any(a in ("-v", "--verbose") for a in argv[:index])
+    if any(a in ("-h", "--help") for a in argv[:index]):
+        top_parser().print_help()
+        return 0
+    module = load(cmd)
+    args = subcommand_parser(cmd, module).parse_args(argv[index + 1:])
+    args.command, args.verbose = cmd.name, verbose or getattr(args, "verbose", False)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
-    if chosen is None or args.command is None:
-        parser.print_help()
-        return 2
     try:
-        return int(_load(chosen).run(args) or 0)
+        return int(module.run(args) or 0)
     except KeyboardInterrupt:
         logging.getLogger("rbc").warning("interrupted")
         return 130

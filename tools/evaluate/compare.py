@@ -7,53 +7,27 @@ per-stage statistics, on the same frames for every model.
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from models.runfiles import CONFIG, HISTORY, read_history, write_text
+from models.runfiles import CONFIG, HISTORY, read_history
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
+from tools.evaluate.paper import PAPER_TABLE10, PAPER_TABLE10_RANGES
 from tools.evaluate.report import format_cell, format_range
 
 log = logging.getLogger("rbc.compare")
 
 #: Table 10 rows (the paper leaves out the obstacle experiment there).
 TABLE10_EXPERIMENTS = tuple(e for e in EXPERIMENTS if e.key != "obstacles")
-#: The paper's Table 10 ranges (offsets from the default), as numbers: the table and the chart use them.
-PAPER_TABLE10_RANGES: dict[str, dict[str, tuple[float, float]]] = {
-    "NVIDIA's approach (paper)": {"light_intensity": (-0.2, 0.3), "light_direction": (-3.0, 7.0),
-                                  "orientation": (-20.0, 10.0)},
-    "Our approach (paper)": {"light_intensity": (-0.6, 1.2), "light_direction": (-30.0, 30.0),
-                             "orientation": (-45.0, 10.0)},
-}
-PAPER_TABLE10 = {
-    "NVIDIA's approach (paper)": {
-        "training_time": "~1.8 hr", "latency": "4-7 ms (mode 4.99 ms)", "no_variation": "≈100 %",
-        "position": "≈100 %", "heading_inversion": "≈100 %", "speed_limit": "50 km/h"},
-    "Our approach (paper)": {
-        "training_time": "~1.4 hr", "latency": "2-6 ms (mode 3.99 ms)", "no_variation": "≈100 %",
-        "position": "≈100 %", "heading_inversion": "≈100 %", "speed_limit": "100 km/h"},
-}
-for _column, _ranges in PAPER_TABLE10_RANGES.items():
-    PAPER_TABLE10[_column].update({k: format_range(lo, hi, experiment(k).unit) for k, (lo, hi) in _ranges.items()})
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--eval", dest="evals", type=Path, action="append", required=True, metavar="DIR",
-                   help="an rbc eval output folder (repeat: one per column)")
-    p.add_argument("--label", dest="labels", action="append", default=None, metavar="TEXT",
-                   help="column title (repeat, same order as --eval)")
-    p.add_argument("--train-run", dest="runs", type=Path, action="append", default=None, metavar="DIR",
-                   help="rbc train run folder of the same model, for the training time (same order)")
-    p.add_argument("--frames", type=int, default=2000, help="frames per latency measurement")
-    p.add_argument("--no-paper", action="store_true", help="leave out the paper's columns")
-    p.add_argument("--layout", choices=("table10", "table9"), default="table10",
-                   help="table10: models side by side with training time and latency; table9: one eval "
-                        "per behavior (simplistic, rigorous, collision) in the layout of the paper's Table 9")
-    p.add_argument("--out", type=Path, required=True, help="Markdown file to write (and .json beside it)")
+def paper_table10() -> dict[str, dict[str, str]]:
+    """The paper's Table 10 columns as printed: the text cells, with the ranges formatted like ours."""
+    return {column: cells | {k: format_range(lo, hi, experiment(k).unit) for k, (lo, hi) in
+                             PAPER_TABLE10_RANGES[column].items()} for column, cells in PAPER_TABLE10.items()}
 
 
 def training_summary(run_dir: Path | None) -> dict[str, Any]:
@@ -96,8 +70,8 @@ def measure_latency(model: Path, frames: int) -> dict[str, Any]:
     """Serve ``model`` with drive_server and drive it with the Unity-wire client; server stats + round trip."""
     import numpy as np
 
-    from tools.bench import drive
-    from tools.server_process import ServerProcess
+    from tools.bench.latency import drive
+    from tools.wire.server_process import ServerProcess
 
     with tempfile.TemporaryDirectory(prefix="rbc_compare_") as tmp:
         stats_path = Path(tmp) / "stats.json"
@@ -124,7 +98,7 @@ def _fmt_latency(lat: dict[str, Any]) -> str:
 
 def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
     head = ["Parameter"] + [c["label"] for c in columns]
-    paper = list(PAPER_TABLE10.items()) if with_paper else []
+    paper = list(paper_table10().items()) if with_paper else []
     head += [name for name, _ in paper]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
@@ -142,52 +116,3 @@ def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
     lines += ["", f"~100 % means: {AUTONOMY_RULE}. Latency: drive_server's own decode-to-command time "
               "and the Unity-wire round trip on this machine (the paper: preprocessing to command on an RTX 2070)."]
     return "\n".join(lines) + "\n"
-
-
-def _table9(args: argparse.Namespace) -> int:
-    from tools.evaluate.report import table9
-
-    summaries = {}
-    for eval_dir in args.evals:
-        results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
-        summaries[results["meta"]["behavior"]] = results["summary"]
-    table = table9(summaries, with_paper=not args.no_paper)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_text(args.out, table)
-    print(table)
-    print(f"wrote {args.out}")
-    return 0
-
-
-def run(args: argparse.Namespace) -> int:
-    missing = [d for d in args.evals if not (d / "results.json").is_file()]
-    if missing:
-        log.error("%s has no results.json: run rbc eval --out %s first", missing[0], missing[0])
-        return 2
-    if args.layout == "table9":
-        return _table9(args)
-    labels = args.labels or [d.name for d in args.evals]
-    runs = args.runs or [None] * len(args.evals)
-    if len(labels) != len(args.evals) or len(runs) != len(args.evals):
-        log.error("give as many --label and --train-run as --eval (or none)")
-        return 2
-    columns = []
-    for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
-        results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
-        model = Path(results["meta"]["model"])
-        log.info("measuring the deployment latency of %s", model)
-        training = training_summary(run_dir)
-        columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),
-                        "model_sha256": results["meta"]["model_sha256"], "summary": results["summary"],
-                        "training_time_s": training.get("seconds"), "training": training,
-                        "latency": measure_latency(model, args.frames)})
-    table = build_table(columns, with_paper=not args.no_paper)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_text(args.out, table)
-    write_text(args.out.with_suffix(".json"), json.dumps(columns, indent=2, default=str))
-    from tools.evaluate.range_chart import plot_ranges
-
-    chart = plot_ranges(columns, args.out.with_suffix(".png"), with_paper=not args.no_paper)
-    print(table)
-    print(f"wrote {args.out}" + (f" and {chart}" if chart else ""))
-    return 0

@@ -8,9 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from protocol.facts import BEHAVIORS
+
 #: The paper reports ranges "for which the ego vehicle exhibited ~100% autonomy". We define it once:
 AUTONOMY_RULE = "no intervention in any lap of the run (eta = 100 %)"
-BEHAVIORS = ("simplistic", "rigorous", "collision")
 
 
 def is_autonomous(run: dict[str, Any]) -> bool:
@@ -94,16 +95,3 @@ def experiment(key: str) -> Experiment:
         if exp.key == key:
             return exp
     raise KeyError(f"unknown experiment {key!r}; known: {', '.join(e.key for e in EXPERIMENTS)}")
-
-
-#: Table 9 of the paper, for side-by-side display (values as printed there).
-PAPER_TABLE9: dict[str, dict[str, str]] = {
-    "no_variation": {"simplistic": "≈100 %", "rigorous": "≈100 %", "collision": "≈100 %"},
-    "obstacles": {"simplistic": "…", "rigorous": "…", "collision": "η{20,10,0} ≈ 100 %"},
-    "light_intensity": {"simplistic": "[-0.4, +0.1] cd", "rigorous": "[-0.2, +0.9] cd", "collision": "[-0.6, +1.0] cd"},
-    "light_direction": {"simplistic": "[-14°, +1°]", "rigorous": "[-2°, +4°]", "collision": "[-18°, +28°]"},
-    "position": {"simplistic": "≈100 %", "rigorous": "≈100 %", "collision": "≈100 %"},
-    "orientation": {"simplistic": "[-35°, +15°]", "rigorous": "[-25°, +25°]", "collision": "[-55°, +40°]"},
-    "heading_inversion": {"simplistic": "≈96.91 %", "rigorous": "≈72.89 %", "collision": "≈91.09 %"},
-    "speed_limit": {"simplistic": "40 km/h", "rigorous": "35 km/h", "collision": "50 km/h"},
-}

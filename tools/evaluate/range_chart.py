@@ -11,9 +11,9 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from models.runfiles import atomic_path
-from tools.evaluate.compare import PAPER_TABLE10_RANGES
+from drive_server.runrecords import atomic_path
 from tools.evaluate.experiments import EXPERIMENTS
+from tools.evaluate.paper import PAPER_TABLE10_RANGES
 
 log = logging.getLogger(__name__)
 

@@ -6,7 +6,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, PAPER_TABLE9, Experiment
+from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, Experiment
+from tools.evaluate.paper import PAPER_TABLE9
 
 log = logging.getLogger(__name__)
 

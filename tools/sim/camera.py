@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-IMG_W, IMG_H = 320, 160
+from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
+
 VFOV_DEG = 60.0  # vertical field of view, as Unity's Camera.fieldOfView
 CAMERA_HEIGHT = 1.6  # metres above the road
 CAMERA_FORWARD = 0.6  # metres ahead of the body centre (roof, above the windscreen)
@@ -25,7 +26,7 @@ MAX_MIP = 6
 
 
 def focal_px() -> float:
-    return (IMG_H / 2) / math.tan(math.radians(VFOV_DEG) / 2)
+    return (FRAME_HEIGHT / 2) / math.tan(math.radians(VFOV_DEG) / 2)
 
 
 def fog_weight(dist: np.ndarray | float) -> np.ndarray | float:
@@ -40,16 +41,16 @@ class CameraModel:
                  pitch_deg: float = CAMERA_PITCH_DEG) -> None:
         self.lateral, self.height, self.forward, self.pitch_deg = lateral, height, forward, pitch_deg
         self.f = focal_px()
-        self.cx, self.cy = (IMG_W - 1) / 2, (IMG_H - 1) / 2
+        self.cx, self.cy = (FRAME_WIDTH - 1) / 2, (FRAME_HEIGHT - 1) / 2
         p = math.radians(pitch_deg)
         fwd = np.array([math.cos(p), 0.0, math.sin(p)])
         right = np.array([0.0, -1.0, 0.0])
         down = np.cross(fwd, right)
         self.axes = np.stack([right, down, fwd])  # rows: camera x (right), y (down), z (forward) in the car frame
-        u, v = np.meshgrid(np.arange(IMG_W, dtype=np.float64), np.arange(IMG_H, dtype=np.float64))
+        u, v = np.meshgrid(np.arange(FRAME_WIDTH, dtype=np.float64), np.arange(FRAME_HEIGHT, dtype=np.float64))
         rays = ((u - self.cx) / self.f)[..., None] * right + ((v - self.cy) / self.f)[..., None] * down + fwd
         # first row whose every ray points below the horizon (no roll, so rows are level)
-        self.horizon_row = int(min(IMG_H, max(0, math.floor(self.cy + self.f * math.tan(p)) + 1)))
+        self.horizon_row = int(min(FRAME_HEIGHT, max(0, math.floor(self.cy + self.f * math.tan(p)) + 1)))
 
         # ground: car-frame hit points (float32 2-channel image for cv2.transform), distances, fog
         g_rays = rays[self.horizon_row:]
@@ -63,7 +64,7 @@ class CameraModel:
         self.clear = np.ascontiguousarray(1.0 - fog[: self.fog_rows])
 
         # ground footprint of a pixel at the centre column, per row (picks the mip level)
-        mid = IMG_W // 2
+        mid = FRAME_WIDTH // 2
         along = np.abs(np.gradient(ground[:, mid, 0])) if len(ground) > 1 else np.ones(len(ground))
         across = np.abs(ground[:, mid + 1, 1] - ground[:, mid, 1])
         self._footprint = np.sqrt(np.maximum(along * across, 1e-12))
@@ -109,6 +110,6 @@ def jitter_homography(f: float, rotation: np.ndarray) -> np.ndarray:
     A pure rotation of a pinhole camera maps its image by this homography whatever the scene depth, so
     bumps (small pitch/roll jitter) are an exact per-frame warp rather than a re-render.
     """
-    cx, cy = (IMG_W - 1) / 2, (IMG_H - 1) / 2
+    cx, cy = (FRAME_WIDTH - 1) / 2, (FRAME_HEIGHT - 1) / 2
     k = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
     return k @ rotation @ np.linalg.inv(k)

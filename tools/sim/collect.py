@@ -21,10 +21,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import cv2
-import numpy as np
-
 from protocol import SpeedUnit
+from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name, last_row_stamp
+from protocol.facts import CAMERAS
+from protocol.jpeg import encode_jpeg
 from protocol.units import from_kmh
 from tools.sim.autopilot import Autopilot, AutopilotParams
 from tools.sim.rules import LapResult
@@ -32,10 +32,6 @@ from tools.sim.session import ScenarioConfig, Simulation
 
 log = logging.getLogger(__name__)
 
-LOG_NAME = "driving_log.csv"
-IMAGE_DIR = "IMG"
-CAMERA_NAMES = ("center", "left", "right")
-JPEG_QUALITY = 75  # Unity's EncodeToJPG default, the same as the telemetry frames
 _EPOCH = dt.datetime(2020, 1, 1, 12, 0, 0)  # first timestamp of a new log (fixed: runs are reproducible)
 
 
@@ -88,32 +84,6 @@ class CollectResult:
         return sum(lap.n_interventions for lap in self.laps)
 
 
-def _num(x: float) -> str:
-    """A number as Unity/C# writes it in the log: ``0``, ``-0.2095149``, ``7.843922E-05``."""
-    if x == 0:
-        return "0"
-    return f"{x:.7g}".replace("e", "E")
-
-
-def _stamp(when: dt.datetime) -> str:
-    return when.strftime("%Y_%m_%d_%H_%M_%S_") + f"{when.microsecond // 1000:03d}"
-
-
-def _last_stamp(log_path: Path) -> dt.datetime | None:
-    """Timestamp of the last row of an existing log (to append after it), if it has one we can read."""
-    if not log_path.is_file():
-        return None
-    lines = [ln for ln in log_path.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
-    if not lines:
-        return None
-    name = lines[-1].split(",")[0].strip().replace("\\", "/").rsplit("/", 1)[-1]
-    stem = name.rsplit(".", 1)[0].split("_", 1)[-1]
-    try:
-        return dt.datetime.strptime(stem[:-4], "%Y_%m_%d_%H_%M_%S") + dt.timedelta(milliseconds=int(stem[-3:]))
-    except ValueError:
-        return None
-
-
 def prepare_output(out_dir: Path, overwrite: bool = False, append: bool = False) -> dt.datetime:
     """Create or check the output folder; return the timestamp of the first new row."""
     if overwrite and append:
@@ -127,15 +97,8 @@ def prepare_output(out_dir: Path, overwrite: bool = False, append: bool = False)
             raise OutputDirError(f"{out_dir} is not empty; pass --overwrite to replace its log and images "
                                  f"or --append to add to them")
     (out_dir / IMAGE_DIR).mkdir(exist_ok=True)
-    last = _last_stamp(out_dir / LOG_NAME) if append else None
+    last = last_row_stamp(out_dir / LOG_NAME) if append else None
     return _EPOCH if last is None else last + dt.timedelta(seconds=10)
-
-
-def _write_jpeg(path: Path, rgb: np.ndarray) -> None:
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-    if not ok:
-        raise OSError(f"JPEG encoding failed for {path}")
-    path.write_bytes(buf.tobytes())
 
 
 def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, append: bool = False,
@@ -147,10 +110,10 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
     directions = (False, True) if config.both_directions else (False,)
     wall0 = time.perf_counter()
     clock = 0.0  # simulated seconds over all drives (timestamps)
-    cameras = CAMERA_NAMES[: config.cameras]
+    cameras = CAMERAS[: config.cameras]
     img_dir = out_dir / IMAGE_DIR
     pending: list[Path] = []
-    with open(out_dir / LOG_NAME, "a", encoding="utf-8", newline="") as csv_file:
+    with LogWriter(out_dir / LOG_NAME) as writer:
         try:
             for k, reverse in enumerate(directions):
                 scenario = ScenarioConfig(
@@ -171,20 +134,17 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                     command = pilot.update(dt_frame, sim.vehicle.state)
                     if sim.t >= next_row - 1e-9:
                         next_row += 1.0 / config.rate_hz
-                        stamp = _stamp(start + dt.timedelta(seconds=round(clock + sim.t, 3)))
+                        when = start + dt.timedelta(seconds=round(clock + sim.t, 3))
                         jitter = sim.camera_jitter()
-                        paths = [img_dir / f"{cam}_{stamp}.jpg" for cam in cameras]
+                        paths = [img_dir / frame_name(cam, when) for cam in cameras]
                         pending = paths
                         for cam, path in zip(cameras, paths, strict=True):
-                            _write_jpeg(path, sim.render(cam, jitter))
+                            path.write_bytes(encode_jpeg(sim.render(cam, jitter)))
                         st = sim.vehicle.state
-                        images = [str(p) for p in paths] + [""] * (3 - len(paths))
                         speed = from_kmh(st.speed * 3.6, config.speed_unit)
-                        row = ", ".join(images + [_num(command.steering), _num(max(0.0, command.throttle)),
-                                                  _num(max(0.0, -command.throttle)), _num(speed)])
                         pending = []  # from here on an interrupt may orphan images, never a row
-                        csv_file.write(row + "\n")
-                        csv_file.flush()
+                        writer.write([str(p) for p in paths], command.steering, max(0.0, command.throttle),
+                                     max(0.0, -command.throttle), speed)
                         result.rows += 1
                         result.zero_steer_rows += command.steering == 0.0
                     sim.advance(1, command)

@@ -178,7 +178,7 @@ class SocketDriver:
         self._sent: deque[float] = deque()
 
     def start(self, scene: Scene) -> None:
-        from tools.unity_client import UnityWireClient
+        from tools.wire.unity_client import UnityWireClient
 
         self.stop()
         self._client = UnityWireClient(self.url, timeout=self.timeout)

@@ -13,10 +13,9 @@ import math
 import cv2
 import numpy as np
 
+from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 from tools.sim.camera import (
     CAMERA_OFFSETS,
-    IMG_H,
-    IMG_W,
     CameraModel,
     camera_models,
     jitter_homography,
@@ -26,7 +25,7 @@ from tools.sim.sky import EL_BOTTOM, EL_TOP, PANO_H, PANO_W, SKY_DIRECT_SHARE
 from tools.sim.sprites import PropPainter
 from tools.sim.world import Pose, World
 
-__all__ = ["CAMERA_OFFSETS", "IMG_H", "IMG_W", "Pose", "Renderer"]
+__all__ = ["CAMERA_OFFSETS", "Pose", "Renderer"]
 
 SKY_PAD = PANO_W // 4  # panorama columns repeated on each side (a camera sees at most 1/4 turn to either side)
 
@@ -43,7 +42,7 @@ class _CameraState:
         rows = (EL_TOP - model.sky_elevation) / (EL_TOP - EL_BOTTOM) * (PANO_H - 1)
         self.sky_y = np.ascontiguousarray(rows, dtype=np.float32)
         haze = np.array(world.haze + (round(255 * SKY_DIRECT_SHARE),), np.uint8)
-        self.haze_block = np.ascontiguousarray(np.broadcast_to(haze, (model.fog_rows, IMG_W, 4)))
+        self.haze_block = np.ascontiguousarray(np.broadcast_to(haze, (model.fog_rows, FRAME_WIDTH, 4)))
 
 
 class Renderer:
@@ -53,7 +52,7 @@ class Renderer:
         self.world = world
         self.props = PropPainter(world)
         self.cameras = {name: _CameraState(model, world) for name, model in camera_models().items()}
-        self._fb = np.empty((IMG_H, IMG_W, 4), np.uint8)
+        self._fb = np.empty((FRAME_HEIGHT, FRAME_WIDTH, 4), np.uint8)
         # the panorama with wrapped margins: cv2.remap's BORDER_WRAP path is ~3x slower than a plain lookup
         pano = world.panorama
         self._sky = np.ascontiguousarray(np.concatenate([pano[:, -SKY_PAD:], pano, pano[:, :SKY_PAD]], 1))
@@ -100,8 +99,8 @@ class Renderer:
         axes = m.axes @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # camera axes, world coordinates
         if pitch_deg or roll_deg:  # a rotated camera sees the same image through a homography
             rot = jitter_rotation(pitch_deg, roll_deg)
-            fb = cv2.warpPerspective(fb, jitter_homography(m.f, rot), (IMG_W, IMG_H), flags=cv2.INTER_LINEAR,
-                                     borderMode=cv2.BORDER_REPLICATE)
+            fb = cv2.warpPerspective(fb, jitter_homography(m.f, rot), (FRAME_WIDTH, FRAME_HEIGHT),
+                                     flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             axes = rot @ axes
         out = cv2.cvtColor(fb, cv2.COLOR_RGBA2RGB)
         if light_intensity != 1.0:

@@ -13,7 +13,8 @@ import math
 import cv2
 import numpy as np
 
-from tools.sim.camera import IMG_W, CameraModel, fog_weight
+from protocol.facts import FRAME_WIDTH
+from tools.sim.camera import CameraModel, fog_weight
 from tools.sim.scenery import CONIFER, RAIL_HEIGHT, TCROWN_R, TCROWN_Z, TH, TKIND, TTINT, TTRUNK_R
 from tools.sim.sky import SKY_DIRECT_SHARE
 from tools.sim.track import CONE_HEIGHT, CONE_RADIUS
@@ -177,7 +178,8 @@ class PropPainter:
         rel = self.xy[idx] - pos[:2]
         cam_xyz = rel @ axes[:, :2].T - pos[2] * axes[:, 2]
         z = cam_xyz[:, 2]
-        ok = (z > NEAR) & (z < self.view_dist) & (np.abs(cam_xyz[:, 0]) < z * ((IMG_W / 2) / cam.f) + self.size[idx])
+        half_fov = (FRAME_WIDTH / 2) / cam.f
+        ok = (z > NEAR) & (z < self.view_dist) & (np.abs(cam_xyz[:, 0]) < z * half_fov + self.size[idx])
         if not ok.any():
             return
         sel = idx[ok]

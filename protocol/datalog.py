@@ -1,9 +1,10 @@
-"""Tolerant reader for simulator driving logs (Udacity ``driving_log.csv``, the paper's ``Driving-Log.csv``).
+"""The driving-log format (Udacity ``driving_log.csv``, the paper's ``Driving-Log.csv``) and its tolerant reader.
 
 Real logs are messy: no header or a header row, absolute Windows paths from another machine, ``", "``
 separators, ``7.8E-05`` numbers, one camera (empty left/right fields) or three. Only the file name of
 a recorded path is trusted: images are looked up next to the log (``DIR/IMG/<name>`` first). Bad rows
 are skipped and reported with file and line so a broken recording is noticed, never silently trained on.
+Stdlib only; the writer is :mod:`protocol.datalog_writer`.
 """
 
 from __future__ import annotations
@@ -15,14 +16,16 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
+from protocol.facts import IMAGE_MAGIC
+
 log = logging.getLogger(__name__)
 
 #: Log file names recognised when a directory is given (Udacity, the paper's simulator).
 LOG_NAMES = ("driving_log.csv", "Driving-Log.csv")
 #: Folders next to the log where frames are searched for by file name, in order.
 IMAGE_DIRS = ("IMG", "Camera-Frames", ".")
-_COLUMNS = ("center", "left", "right", "steering", "throttle", "brake", "speed")
-_IMAGE_MAGIC = (b"\xff\xd8", b"\x89PNG")
+#: Column order of a log without a header row (Udacity and the paper's simulator alike).
+COLUMNS = ("center", "left", "right", "steering", "throttle", "brake", "speed")
 
 
 class DataLogError(ValueError):
@@ -151,7 +154,7 @@ def _is_header(cells: Sequence[str]) -> bool:
     try:
         float(cells[3] if len(cells) >= 7 else cells[1])
     except (ValueError, IndexError):
-        return any(c.lower() in _COLUMNS for c in cells)
+        return any(c.lower() in COLUMNS for c in cells)
     return False
 
 
@@ -160,12 +163,12 @@ def _header_columns(cells: Sequence[str], log_path: Path, line: int) -> dict[str
     missing = [c for c in ("center", "steering") if c not in names]
     if missing:
         raise DataLogError(f"{log_path}:{line}: header row lacks column(s) {missing}")
-    return {c: names[c] for c in _COLUMNS if c in names}
+    return {c: names[c] for c in COLUMNS if c in names}
 
 
-def _positional(n: int) -> dict[str, int]:
+def positional_columns(n: int) -> dict[str, int]:
     if n >= 7:
-        return {c: i for i, c in enumerate(_COLUMNS)}
+        return {c: i for i, c in enumerate(COLUMNS)}
     if n in (5, 6):  # one camera without the empty side fields: center, steering, throttle, brake, speed
         return {"center": 0, "steering": 1, "throttle": 2, "brake": 3, "speed": 4}
     if n == 4:  # three cameras and steering only
@@ -193,7 +196,7 @@ def _number(cells: Sequence[str], columns: dict[str, int], name: str, required: 
 
 def _parse_row(cells: list[str], columns: dict[str, int] | None, resolver: _ImageResolver, log_path: Path,
                line: int) -> Sample:
-    cols = columns if columns is not None else _positional(len(cells))
+    cols = columns if columns is not None else positional_columns(len(cells))
     steering = _number(cells, cols, "steering", required=True)
     if abs(steering) > 1.0 + 1e-6:
         raise _RowError(f"bad number: steering {steering} outside -1..1 (not normalised?)")
@@ -253,5 +256,5 @@ def _check_readable(path: Path) -> None:
             head = fh.read(4)
     except OSError as exc:
         raise _RowError(f"unreadable image: {path.name} ({exc.strerror})") from None
-    if not head.startswith(_IMAGE_MAGIC):
+    if not head.startswith(IMAGE_MAGIC):
         raise _RowError(f"unreadable image: {path.name} is not a JPEG/PNG")

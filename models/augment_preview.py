@@ -7,22 +7,12 @@ the paper's Figures 3-9) and the network input the fast training path makes from
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
-from models.augment import CAMERAS, AugParams, augment_reference, draw_params
-from models.behavior import Approach, Arch, Behavior, pipeline_for
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--data", action="append", required=True, metavar="DIR", help="recording directory or log")
-    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default="simplistic")
-    parser.add_argument("--arch", choices=[a.value for a in Arch], default="shallow")
-    parser.add_argument("--approach", choices=[a.value for a in Approach], default="ours")
-    parser.add_argument("--out", required=True, type=Path, help="PNG file to write")
-    parser.add_argument("--n", type=int, default=16, help="number of samples")
-    parser.add_argument("--seed", type=int, default=0)
+from models.augment import AugParams, augment_reference, draw_params
+from models.behavior import pipeline_for
+from protocol.facts import CAMERAS
 
 
 def describe(params: AugParams, i: int) -> str:
@@ -45,16 +35,16 @@ def describe(params: AugParams, i: int) -> str:
     return " ".join(parts) or "none"
 
 
-def run(args: argparse.Namespace) -> int:
+def write_preview(args: argparse.Namespace) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
     import cv2
     import matplotlib.pyplot as plt
 
-    from models.datalog import read_logs
     from models.fastaug import FastAugmenter
     from models.framecache import build_cache, load_frame
+    from protocol.datalog import read_logs
 
     pipeline = pipeline_for(args.behavior, args.arch, args.approach)
     dataset = read_logs(args.data)

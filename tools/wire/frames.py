@@ -16,16 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from models.datalog import find_log, read_log
 from protocol import FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG, encode_image, encode_telemetry
+from protocol.datalog import find_log, read_log
+from protocol.facts import CAMERAS
 
 log = logging.getLogger(__name__)
 
-CAMERAS = ("center", "left", "right")
 
 
 @dataclass(frozen=True)
-class Frame:
+class SourceFrame:
     """A ready-to-send frame: base64 JPEG plus the vehicle state that goes with it."""
 
     image_b64: str
@@ -38,7 +38,7 @@ class Frame:
         return encode_telemetry(self.steering_deg, self.throttle, self.speed, self.image_b64, decimal)
 
 
-def log_frames(path: Path, camera: str = "center") -> list[Frame]:
+def log_frames(path: Path, camera: str = "center") -> list[SourceFrame]:
     """All frames of a driving log from one camera, JPEG bytes sent as recorded."""
     if camera not in CAMERAS:
         raise ValueError(f"camera must be one of {CAMERAS}, not {camera!r}")
@@ -49,12 +49,12 @@ def log_frames(path: Path, camera: str = "center") -> list[Frame]:
         if image is None:
             raise ValueError(f"{row.log}:{row.line}: the log has no {camera} camera image")
         jpeg = image.read_bytes()
-        frames.append(Frame(base64.b64encode(jpeg).decode("ascii"), row.steering * MAX_STEERING_DEG,
+        frames.append(SourceFrame(base64.b64encode(jpeg).decode("ascii"), row.steering * MAX_STEERING_DEG,
                             row.throttle, row.speed))
     return frames
 
 
-def synthetic_frames(n: int, seed: int = 0) -> list[Frame]:
+def synthetic_frames(n: int, seed: int = 0) -> list[SourceFrame]:
     """``n`` generated 320x160 road-like frames (sky, grey road, lane edges, noise), JPEG quality 75."""
     rng = np.random.default_rng(seed)
     frames = []
@@ -72,11 +72,11 @@ def synthetic_frames(n: int, seed: int = 0) -> list[Frame]:
         img[edge] = (230, 230, 230)
         noise = rng.integers(-12, 13, img.shape, dtype=np.int16)
         img = (img.astype(np.int16) + noise).clip(0, 255).astype(np.uint8)
-        frames.append(Frame(encode_image(img), float(rng.uniform(-5, 5)), 0.2, float(rng.uniform(0, 30))))
+        frames.append(SourceFrame(encode_image(img), float(rng.uniform(-5, 5)), 0.2, float(rng.uniform(0, 30))))
     return frames
 
 
-def cycle_payloads(frames: list[Frame], n: int | None = None, decimal: str = ".") -> Iterator[dict[str, str]]:
+def cycle_payloads(frames: list[SourceFrame], n: int | None = None, decimal: str = ".") -> Iterator[dict[str, str]]:
     """Payloads of ``frames`` cycled (``n`` in total, or forever); each payload is built once."""
     if not frames:
         raise ValueError("no frames to send")

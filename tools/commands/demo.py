@@ -12,15 +12,15 @@ import json
 import logging
 from pathlib import Path
 
+from protocol.facts import BEHAVIORS
+from tools.evaluate.experiments import SETUPS
+
 log = logging.getLogger("rbc.demo")
 
-#: The track each bundled behavior was trained on (and so is demonstrated on).
-DEMO_SCENES = {"simplistic": {"track": "lake"}, "rigorous": {"track": "mountain"},
-               "collision": {"track": "lake", "cones": 20, "cone_seed": 1}}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--behavior", choices=sorted(DEMO_SCENES), default="simplistic",
+    p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
                    help="which bundled model, and its track (default simplistic on lake)")
     p.add_argument("--model", type=Path, default=None, help="drive with this ONNX model instead of a bundled one")
     p.add_argument("--laps", type=int, default=1)
@@ -42,12 +42,13 @@ def _server_latency(stats_path: Path) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from drive_server.models_dir import bundled_model_path
-    from models.runfiles import write_json
-    from tools.server_process import ServerProcess, ServerStartError
-    from tools.sim.cli import Progress, print_summary
+    from drive_server.runrecords import write_json
+    from tools.console import Progress
     from tools.sim.drivers import SocketDriver
     from tools.sim.session import ScenarioConfig, run_scenario
+    from tools.sim.summary import print_summary
     from tools.sim.viz import StripCollector, write_trajectory_map
+    from tools.wire.server_process import ServerProcess, ServerStartError
 
     model = args.model or bundled_model_path(args.behavior)
     if not model.is_file():
@@ -56,7 +57,9 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     stats_path = out / "server_stats.json"
-    config = ScenarioConfig(laps=args.laps, speed_limit_kmh=args.speed_limit, **DEMO_SCENES[args.behavior])
+    setup = SETUPS[args.behavior]  # the scene each bundled behavior was trained on, so is demonstrated on
+    config = ScenarioConfig(track=setup.track, cones=setup.cones, cone_seed=setup.cone_seed, laps=args.laps,
+                            speed_limit_kmh=args.speed_limit)
     strip = StripCollector(every_s=8.0)
     server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0"],
                            stats_json=stats_path)

@@ -11,13 +11,8 @@ Needs only numpy and ``protocol``.
 
 from __future__ import annotations
 
-import base64
-import hashlib
 import json
 import logging
-import os
-import socket
-import struct
 import time
 from types import TracebackType
 from typing import Any
@@ -25,49 +20,17 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from protocol import ProtocolError, SteerCommand, parse_steer
+from protocol import SteerCommand, parse_steer
+from tools.wire.websocket import OP_BINARY, OP_TEXT, ConnectionClosed, WebSocketConnection, client_frame
 
 log = logging.getLogger(__name__)
 
-_WS_GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
-_OP_CONT, _OP_TEXT, _OP_BINARY, _OP_CLOSE, _OP_PING, _OP_PONG = 0x0, 0x1, 0x2, 0x8, 0x9, 0xA
 #: The Unity client sends its own Engine.IO ping every 25 s (besides answering the server's).
 CLIENT_PING_INTERVAL_S = 25.0
 _JSON_UNSAFE = ('"', "\\")
+_frame = client_frame  # the name the protocol tests use
 
-
-class ConnectionClosed(ConnectionError):
-    """The server closed the WebSocket (or the Engine.IO session)."""
-
-
-def mask_payload(payload: bytes, mask: bytes) -> bytes:
-    """XOR ``payload`` with the 4-byte WebSocket ``mask`` (RFC 6455 section 5.3), vectorised.
-
-    Viewing the payload as native uint32 words and the mask as the same native word keeps the byte
-    order consistent on any endianness; the 0-3 trailing bytes are done separately.
-    """
-    n = len(payload)
-    n4 = n & ~3
-    out = bytearray(n)
-    if n4:
-        words = np.frombuffer(payload, dtype=np.uint32, count=n4 // 4)
-        np.bitwise_xor(words, np.frombuffer(mask, dtype=np.uint32)[0], out=np.frombuffer(out, np.uint32, n4 // 4))
-    for i in range(n4, n):
-        out[i] = payload[i] ^ mask[i & 3]
-    return bytes(out)
-
-
-def _frame(opcode: int, payload: bytes) -> bytes:
-    """One final, masked client frame."""
-    n = len(payload)
-    if n < 126:
-        header = struct.pack("!BB", 0x80 | opcode, 0x80 | n)
-    elif n < 65536:
-        header = struct.pack("!BBH", 0x80 | opcode, 0x80 | 126, n)
-    else:
-        header = struct.pack("!BBQ", 0x80 | opcode, 0x80 | 127, n)
-    mask = os.urandom(4)
-    return header + mask + mask_payload(payload, mask)
+__all__ = ["CLIENT_PING_INTERVAL_S", "ConnectionClosed", "UnityWireClient"]
 
 
 def _json_string(text: str) -> str:
@@ -111,9 +74,7 @@ class UnityWireClient:
         self.server_ping_interval_s: float | None = None
         self.pings_answered = 0
         self.pings_sent = 0
-        self._sock: socket.socket | None = None
-        self._sock_timeout = timeout
-        self._buf = bytearray()
+        self._ws = WebSocketConnection(self.host, self.port, timeout)
         self._last_ping_sent = 0.0
 
     # -- context manager -------------------------------------------------------------------------
@@ -128,37 +89,11 @@ class UnityWireClient:
     # -- connection ------------------------------------------------------------------------------
     def connect(self) -> None:
         """Open the WebSocket and read the Engine.IO open packet; sends nothing else (no ``40``)."""
-        sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._sock = sock
-        self._sock_timeout = self.timeout
-        key = base64.b64encode(os.urandom(16)).decode("ascii")
-        request = (
-            "GET /socket.io/?EIO=4&transport=websocket HTTP/1.1\r\n"
-            f"Host: {self.host}:{self.port}\r\n"
-            "User-Agent: websocket-sharp/1.0\r\n"
-            "Upgrade: websocket\r\n"
-            "Connection: Upgrade\r\n"
-            f"Sec-WebSocket-Key: {key}\r\n"
-            "Sec-WebSocket-Version: 13\r\n\r\n"
-        )
-        sock.sendall(request.encode("ascii"))
-        while b"\r\n\r\n" not in self._buf:
-            self._fill()
-        head, _, rest = bytes(self._buf).partition(b"\r\n\r\n")
-        self._buf = bytearray(rest)
-        lines = head.decode("latin-1").split("\r\n")
-        if not lines[0].startswith("HTTP/1.1 101"):
-            self.close()
-            raise ConnectionError(f"WebSocket upgrade refused: {lines[0]!r}")
-        headers = {k.strip().lower(): v.strip() for k, _, v in (ln.partition(":") for ln in lines[1:])}
-        accept = base64.b64encode(hashlib.sha1(key.encode("ascii") + _WS_GUID).digest()).decode("ascii")
-        if headers.get("sec-websocket-accept") != accept:
-            self.close()
-            raise ConnectionError("WebSocket upgrade: bad Sec-WebSocket-Accept")
+        self._ws = WebSocketConnection(self.host, self.port, self.timeout)
+        self._ws.open("/socket.io/?EIO=4&transport=websocket", user_agent="websocket-sharp/1.0")
         opcode, data = self._read_message()
         text = data.decode("utf-8", errors="replace")
-        if opcode != _OP_TEXT or not text.startswith("0"):
+        if opcode != OP_TEXT or not text.startswith("0"):
             self.close()
             raise ConnectionError(f"expected the Engine.IO open packet, got {text[:60]!r}")
         info = json.loads(text[1:])
@@ -168,22 +103,14 @@ class UnityWireClient:
 
     def close(self) -> None:
         """Send a WebSocket close frame and close the socket (idempotent)."""
-        sock, self._sock = self._sock, None
-        if sock is None:
-            return
-        try:
-            sock.sendall(_frame(_OP_CLOSE, struct.pack("!H", 1000)))
-        except OSError:
-            pass
-        finally:
-            sock.close()
+        self._ws.close()
 
     # -- sending ---------------------------------------------------------------------------------
     def send_text(self, text: str) -> None:
         """Send one raw Engine.IO packet (text frame); no waiting. Public for protocol tests."""
-        self._send_frame(_OP_TEXT, text.encode("utf-8"))
+        self._send_frame(OP_TEXT, text.encode("utf-8"))
 
-    def send_bytes(self, data: bytes, opcode: int = _OP_TEXT) -> None:
+    def send_bytes(self, data: bytes, opcode: int = OP_TEXT) -> None:
         """Send arbitrary bytes as one frame (for tests of what the server refuses)."""
         self._send_frame(opcode, data)
 
@@ -197,7 +124,7 @@ class UnityWireClient:
 
     def telemetry_frame(self, payload: dict[str, Any] | None) -> bytes:
         """The masked WebSocket frame of one ``telemetry`` event (see ``send_telemetry``)."""
-        return _frame(_OP_TEXT, self.telemetry_text(payload).encode("utf-8"))
+        return _frame(OP_TEXT, self.telemetry_text(payload).encode("utf-8"))
 
     def telemetry_text(self, payload: dict[str, Any] | None) -> str:
         """The Engine.IO packet text of one ``telemetry`` event (see ``send_telemetry``)."""
@@ -267,13 +194,13 @@ class UnityWireClient:
         if now - self._last_ping_sent >= self.ping_interval_s:
             self._last_ping_sent = now
             self.pings_sent += 1
-            self._sock.sendall(_frame(_OP_TEXT, b"2"))  # type: ignore[union-attr]
+            self._ws.send_raw(_frame(OP_TEXT, b"2"))
 
     def _receive_packet(self, deadline: float | None) -> str:
         """Next Engine.IO packet that is not a ping (server pings are answered with ``3``)."""
         while True:
             opcode, data = self._read_message(deadline)
-            if opcode == _OP_BINARY:
+            if opcode == OP_BINARY:
                 log.debug("ignoring a binary frame of %d bytes", len(data))
                 continue
             text = data.decode("utf-8")
@@ -289,74 +216,11 @@ class UnityWireClient:
         self._send_raw(_frame(opcode, payload))
 
     def _send_raw(self, frame: bytes) -> None:
-        if self._sock is None:
+        if not self._ws.connected:
             raise ConnectionClosed("not connected")
-        if frame[0] & 0x0F == _OP_TEXT:
+        if frame[0] & 0x0F == OP_TEXT:
             self._maybe_ping()
-        try:
-            self._sock.sendall(frame)
-        except OSError as exc:
-            raise ConnectionClosed(f"connection lost: {exc}") from None
-
-    def _fill(self, deadline: float | None = None) -> None:
-        if self._sock is None:
-            raise ConnectionClosed("not connected")
-        timeout = self.timeout if deadline is None else min(self.timeout, deadline - time.monotonic())
-        if timeout <= 0:
-            raise TimeoutError("no reply from the server in time")
-        if timeout != self._sock_timeout:  # settimeout costs two fcntl calls: only when it changes
-            self._sock.settimeout(timeout)
-            self._sock_timeout = timeout
-        try:
-            chunk = self._sock.recv(65536)
-        except TimeoutError:
-            raise TimeoutError("no reply from the server in time") from None
-        except OSError as exc:
-            raise ConnectionClosed(f"connection lost: {exc}") from None
-        if not chunk:
-            raise ConnectionClosed("server closed the connection")
-        self._buf += chunk
-
-    def _need(self, n: int, deadline: float | None) -> None:
-        while len(self._buf) < n:
-            self._fill(deadline)
+        self._ws.send_raw(frame)
 
     def _read_message(self, deadline: float | None = None) -> tuple[int, bytes]:
-        """One complete data message (fragments joined); control frames are handled here."""
-        parts: list[bytes] = []
-        first_opcode = None
-        while True:
-            self._need(2, deadline)
-            b0, b1 = self._buf[0], self._buf[1]
-            fin, opcode, n, pos = b0 & 0x80, b0 & 0x0F, b1 & 0x7F, 2
-            if n == 126:
-                self._need(4, deadline)
-                n, pos = struct.unpack_from("!H", self._buf, 2)[0], 4
-            elif n == 127:
-                self._need(10, deadline)
-                n, pos = struct.unpack_from("!Q", self._buf, 2)[0], 10
-            mask = None
-            if b1 & 0x80:  # servers must not mask, but tolerate it
-                self._need(pos + 4, deadline)
-                mask, pos = bytes(self._buf[pos:pos + 4]), pos + 4
-            self._need(pos + n, deadline)
-            data = bytes(self._buf[pos:pos + n])
-            del self._buf[:pos + n]
-            if mask is not None:
-                data = mask_payload(data, mask)
-            if opcode == _OP_CLOSE:
-                self.close()
-                raise ConnectionClosed("server sent a WebSocket close frame"
-                                       + (f" (code {struct.unpack('!H', data[:2])[0]})" if len(data) >= 2 else ""))
-            if opcode == _OP_PING:
-                self._send_frame(_OP_PONG, data)
-                continue
-            if opcode == _OP_PONG:
-                continue
-            if opcode != _OP_CONT:
-                first_opcode = opcode
-            parts.append(data)
-            if fin:
-                if first_opcode is None:
-                    raise ProtocolError("WebSocket continuation frame without a first frame")
-                return first_opcode, parts[0] if len(parts) == 1 else b"".join(parts)
+        return self._ws.read_message(deadline)

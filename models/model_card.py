@@ -1,16 +1,11 @@
-"""Write the model card of a bundled model from its training run and a closed-loop check.
-
-Used when (re)building ``models/pretrained``: ``python -m tools.model_card RUN_DIR --behavior B
---recipe "..." --eval-json SIM_RESULT.json --out models/pretrained/B.md``.
-"""
+"""The model card of a bundled model: its data, configuration, validation MSE and closed-loop result."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
-from models.runfiles import CONFIG, HISTORY, read_history, write_text
+from models.runfiles import CONFIG, HISTORY, read_history
 
 ARCHITECTURES = {"shallow": "The paper's shallow CNN (14,065 parameters, 64x64 input)",
                  "pilotnet": "NVIDIA's PilotNet (252,219 parameters, 200x66 input)"}
@@ -63,19 +58,3 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
         "",
     ]
     return "\n".join(lines)
-
-
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("run_dir", type=Path)
-    p.add_argument("--behavior", required=True)
-    p.add_argument("--recipe", required=True)
-    p.add_argument("--sim-json", type=Path, required=True, help="rbc sim --json output of the no-variation lap")
-    p.add_argument("--out", type=Path, required=True)
-    a = p.parse_args()
-    text = card(a.run_dir, a.behavior, a.recipe, json.loads(a.sim_json.read_text()), a.out.with_suffix(".onnx").name)
-    write_text(a.out, text)
-
-
-if __name__ == "__main__":
-    main()

@@ -7,6 +7,8 @@ import logging
 from pathlib import Path
 
 from protocol import SpeedUnit
+from tools.console import Progress
+from tools.sim.summary import print_summary
 
 log = logging.getLogger("rbc.sim")
 
@@ -46,35 +48,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--video", type=Path, default=None, metavar="MP4", help="annotated camera video (mp4v)")
 
 
-class Progress:
-    """tqdm when installed (the train extra), otherwise a log line every 10 %."""
-
-    def __init__(self, desc: str, logger: logging.Logger = log) -> None:
-        self.desc, self.log = desc, logger
-        self._bar = None
-        self._last = -1
-        try:
-            from tqdm import tqdm
-        except ImportError:
-            tqdm = None
-        self._tqdm = tqdm
-
-    def __call__(self, done: float, total: float) -> None:
-        if self._tqdm is not None:
-            if self._bar is None:
-                self._bar = self._tqdm(total=round(total), desc=self.desc, unit="m", dynamic_ncols=True)
-            self._bar.update(round(done) - self._bar.n)
-            return
-        tenth = int(10 * done / total) if total else 10
-        if tenth > self._last:
-            self._last = tenth
-            self.log.info("%s: %3d %% (%.0f of %.0f m)", self.desc, 10 * tenth, done, total)
-
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()
-
-
 def _driver(args: argparse.Namespace):
     from tools.sim.drivers import AutopilotDriver, OnnxDriver, SocketDriver
 
@@ -84,33 +57,6 @@ def _driver(args: argparse.Namespace):
         return OnnxDriver(args.model, speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
                           tau=args.tau, speed_unit=args.speed_unit, threads=args.threads)
     return AutopilotDriver(speed_kmh=args.speed_limit, seed=args.seed)
-
-
-def print_summary(result, speed_limit_note: str) -> None:
-    """The per-lap table and the run's totals."""
-    cfg = result.config
-    print(f"track {cfg.track} ({result.track_length_m:.0f} m), driver {result.driver}, {speed_limit_note}")
-    head = (f"{'lap':>3}  {'eta %':>6}  {'int':>3}  {'causes':<26} {'time s':>7}  {'km/h':>5}  "
-            f"{'cte rms':>7}  {'cte max':>7}  {'coll':>4}  {'lane':>4}")
-    print(head)
-    print("-" * len(head))
-    for lap in result.laps:
-        causes = ", ".join(f"{k} {v}" for k, v in sorted(lap.causes().items())) or "-"
-        eta = f"{lap.eta:6.1f}" + ("*" if lap.eta_clamped else " ")
-        flag = "" if lap.completed else "  (not finished)"
-        print(f"{lap.lap:>3}  {eta:>7} {lap.n_interventions:>3}  {causes:<26} {lap.lap_time_s:>7.1f}  "
-              f"{lap.mean_speed_kmh:>5.1f}  {lap.cte_rms_m:>7.2f}  {lap.cte_max_m:>7.2f}  {lap.collisions:>4}  "
-              f"{lap.lane_departures:>4}{flag}")
-    if any(lap.eta_clamped for lap in result.laps):
-        print("* Eq. 1 went below 0 (more intervention time than lap time) and was clamped at 0")
-    for lap in result.laps:
-        for i in lap.interventions:
-            print(f"    lap {lap.lap}: {i.cause:<9} at s={i.s:7.1f} m  (x={i.x:7.1f}, y={i.y:7.1f})  t={i.t:7.1f} s")
-    mode = "real time" if cfg.realtime else f"lock-step {cfg.control_hz:g} Hz"
-    print(f"wall {result.wall_time_s:.2f} s for {result.sim_time_s:.1f} s simulated ({mode}), "
-          f"{result.frames} frames ({result.frames / max(result.wall_time_s, 1e-9):.0f}/s), "
-          f"latency p50 {result.latency_ms_p50:.2f} ms p99 {result.latency_ms_p99:.2f} ms"
-          + ("  [interrupted]" if result.interrupted else ""))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -171,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
             video.close()
     print_summary(result, note)
     if args.json:
-        from models.runfiles import write_json
+        from drive_server.runrecords import write_json
 
         write_json(args.json, result.to_dict())
         print(f"json  {args.json}")

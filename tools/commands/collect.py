@@ -7,6 +7,7 @@ import logging
 from pathlib import Path
 
 from protocol import SpeedUnit
+from tools.console import Progress
 
 log = logging.getLogger("rbc.collect")
 
@@ -40,8 +41,6 @@ def run(args: argparse.Namespace) -> int:
         cone_seed=args.cone_seed, cameras=args.cameras, rate_hz=args.rate_hz, seed=args.seed,
         speed_kmh=args.speed_kmh, speed_unit=args.speed_unit, light_intensity=args.light_intensity,
         light_direction_deg=args.light_direction)
-    from tools.sim.cli import Progress
-
     progress = Progress(f"collect {args.track}", log)
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)

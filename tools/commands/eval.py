@@ -3,19 +3,18 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from models.runfiles import write_json, write_text
+from drive_server.runrecords import code_version, file_sha256, write_json, write_text
 from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS
+from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
-from tools.evaluate.runner import DriverSpec, Runner, read_journal, spec_dict
+from tools.evaluate.runner import DriverSpec, Runner, spec_dict
 from tools.evaluate.suite import SuiteConfig, run_suite
-from tools.provenance import code_version, file_sha256
 
 log = logging.getLogger("rbc.eval")
 
@@ -61,8 +60,8 @@ def run(args: argparse.Namespace) -> int:
     spec = DriverSpec(model=None if args.server else str(model), server=args.server)
     model_sha = file_sha256(model)
     journal = out / "runs.jsonl"
-    reuse = _prepare_journal(out, journal, {"model_sha256": model_sha, "behavior": args.behavior,
-                                            "driver": _driver_identity(spec)}, args.resume)
+    reuse = prepare_journal(out, journal, {"model_sha256": model_sha, "behavior": args.behavior,
+                                            "driver": driver_identity(spec)}, args.resume)
     cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
                       map_dir=str(out / "failures"))
@@ -101,41 +100,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
     print(f"\nwrote {out / 'results.json'}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
     return 0
-
-
-def _driver_identity(spec: DriverSpec) -> dict:
-    """What of the driver decides the runs (not the model path or server URL, which may move)."""
-    fields = {k: v for k, v in spec_dict(spec).items() if k not in ("model", "server")}
-    return fields | {"mode": "socket" if spec.server else "in-process"}
-
-
-def _prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> dict[str, dict]:
-    """Start a fresh journal, or (``--resume``) load the runs of an earlier one for the same model.
-
-    ``journal.json`` beside the journal says which model and driver wrote it, so a resume never mixes
-    runs of two models. A fresh start keeps an earlier journal as runs.previous.jsonl instead of deleting it.
-    """
-    identity_file = out / "journal.json"
-    reuse: dict[str, dict] = {}
-    if resume and journal.is_file():
-        if identity_file.is_file():
-            earlier = json.loads(identity_file.read_text(encoding="utf-8"))
-            if earlier != identity:
-                diff = sorted(k for k in identity if earlier.get(k) != identity[k])
-                raise SystemExit(f"rbc eval --resume: the journal in {out} was written for a different "
-                                 f"{', '.join(diff)}; use a new --out, or drop --resume to start afresh")
-        reuse = read_journal(journal)
-        # rewrite it with the complete records only, so new runs never append to a line cut in half
-        write_text(journal, "".join(json.dumps(r) + "\n" for r in reuse.values()))
-        log.info("resuming: %d finished runs in %s", len(reuse), journal)
-    elif resume:
-        log.info("--resume: no journal in %s yet; starting afresh", out)
-    elif journal.is_file() and journal.stat().st_size:
-        journal.replace(out / "runs.previous.jsonl")
-        log.info("starting afresh; the earlier journal is kept as %s (--resume would have reused it)",
-                 out / "runs.previous.jsonl")
-    write_json(identity_file, identity)
-    return reuse
 
 
 def _progress():

@@ -11,61 +11,14 @@
 
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
-from models import runfiles
-
 LAP_FRAMES = 1200  # about one lap of the lake track at the simulator's recording rate
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="directory written by rbc train")
-    parser.add_argument("--data", action="append", metavar="DIR",
-                        help="recordings (default: those of the run; the split shown is then of these)")
-    parser.add_argument("--frames", type=int, default=LAP_FRAMES, help="consecutive frames for the prediction plot")
-    parser.add_argument("--samples", type=int, default=4, help="frames shown with their activation maps")
-
-
-def run(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import torch
-
-    from models.behavior import pipeline_for
-    from models.nets import build_model
-    from models.train import TrainConfig
-    from models.trainingdata import prepare_data
-
-    run_dir: Path = args.run_dir
-    record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
-    config = TrainConfig.from_dict(record["config"])
-    pipeline = pipeline_for(config.behavior, config.arch, config.approach)
-    data = prepare_data(args.data or config.data, pipeline, config.seed, config.val_fraction)
-    out = run_dir / "inspect"
-    out.mkdir(parents=True, exist_ok=True)
-    written = [_histograms(out, data, pipeline, config.seed)]
-    if (run_dir / runfiles.HISTORY).exists():
-        written.append(_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY)))
-    model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
-    checkpoint = run_dir / runfiles.CHECKPOINT
-    if checkpoint.exists():
-        model.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["model"])
-    model.eval()
-    path, mse = _predictions(out, data, pipeline, model, run_dir / runfiles.MODEL, args.frames)
-    written.append(path)
-    written.append(_activations(out, data, pipeline, model, args.samples, config.seed))
-    for p in written:
-        print(p)
-    print(f"prediction MSE over the plotted frames: {mse:.5f}")
-    return 0
-
-
-def _histograms(out: Path, data, pipeline, seed: int) -> Path:
+def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
     import matplotlib.pyplot as plt
 
     from models.augment import draw_params
@@ -93,7 +46,7 @@ def _histograms(out: Path, data, pipeline, seed: int) -> Path:
     return path
 
 
-def _loss(out: Path, history: list[dict[str, float]]) -> Path:
+def plot_loss(out: Path, history: list[dict[str, float]]) -> Path:
     import matplotlib.pyplot as plt
 
     epochs = [h["epoch"] for h in history]
@@ -113,7 +66,7 @@ def _loss(out: Path, history: list[dict[str, float]]) -> Path:
     return path
 
 
-def _predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: int) -> tuple[Path, float]:
+def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: int) -> tuple[Path, float]:
     import matplotlib.pyplot as plt
     import torch
 
@@ -187,7 +140,7 @@ def _channel_mosaic(act: np.ndarray) -> np.ndarray:
     return mosaic
 
 
-def _activations(out: Path, data, pipeline, model, count: int, seed: int) -> Path:
+def plot_activations(out: Path, data, pipeline, model, count: int, seed: int) -> Path:
     import cv2
     import matplotlib.pyplot as plt
     import torch

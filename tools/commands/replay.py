@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.frames import log_frames
-from tools.unity_client import ConnectionClosed, UnityWireClient
+from tools.wire.frames import log_frames
+from tools.wire.unity_client import ConnectionClosed, UnityWireClient
 
 log = logging.getLogger("rbc.replay")
 

@@ -117,7 +117,7 @@ def build_model(arch: Arch, contract: PreprocessContract | None = None, seed: in
     graph_out = helper.make_tensor_value_info("steering", TensorProto.FLOAT, ["batch", 1])
     graph = helper.make_graph(nodes, arch.name, [graph_in], [graph_out], inits)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
-                              producer_name="rbc.tools.onnx_builders")
+                              producer_name="rbc.tools.bench.onnx_builders")
     model.ir_version = min(model.ir_version, 8)  # loadable by older ONNX Runtime releases too
     if with_metadata:
         helper.set_model_props(model, {METADATA_KEY: contract.to_json(),

@@ -2,7 +2,7 @@
 
 Real JPEG frames (a recorded driving log, cycled) go through ``UnityWireClient`` closed loop, one frame
 per reply, so the numbers are what a simulator waits for. Without ``--model`` the networks are built with
-random weights (``tools.onnx_builders``; needs the ``onnx`` package, not torch): latency does not depend
+random weights (``tools.bench.onnx_builders``; needs the ``onnx`` package, not torch): latency does not depend
 on the weights. The server runs as a child process unless ``--server URL`` points at a running one.
 """
 
@@ -15,20 +15,20 @@ import multiprocessing as mp
 import queue
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tools.frames import Frame, log_frames, synthetic_frames
-from tools.server_process import ServerProcess, ServerStartError
-from tools.unity_client import UnityWireClient
+from drive_server.stats import STAGES
+from tools.wire.frames import SourceFrame, log_frames, synthetic_frames
+from tools.wire.server_process import ServerProcess
+from tools.wire.unity_client import UnityWireClient
 
 log = logging.getLogger("rbc.bench")
 
 DEFAULT_LOG = Path(__file__).resolve().parents[1] / "tests" / "data" / "udacity-sample"
-STAGES = ("decode", "preprocess", "inference", "control", "total")
 
 
 @dataclass
@@ -46,23 +46,7 @@ class BenchResult:
     workers: int = 1
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--server", default=None, help="benchmark a running server at this URL instead of starting one")
-    p.add_argument("--model", type=Path, default=None, help="ONNX model (default: build --arch with random weights)")
-    p.add_argument("--arch", choices=("shallow", "pilotnet", "both"), default="shallow",
-                   help="architecture(s) to build when no --model is given (default shallow)")
-    p.add_argument("--frames", type=int, default=2000, help="measured frames per client (default 2000)")
-    p.add_argument("--warmup", type=int, default=200, help="unmeasured frames per client first (default 200)")
-    p.add_argument("--clients", type=int, default=1, help="concurrent closed-loop clients, one process each")
-    p.add_argument("--log", type=Path, default=None, help="driving-log folder to take frames from "
-                   "(default: tests/data/udacity-sample, else synthetic frames)")
-    p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads of the started server")
-    p.add_argument("--workers", type=int, default=1, help="worker processes of the started server (default 1)")
-    p.add_argument("--stock-transport", action="store_true", help="start the server without transport tuning")
-    p.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
-
-
-def _load_frames(log_dir: Path | None) -> tuple[list[Frame], str]:
+def load_frames(log_dir: Path | None) -> tuple[list[SourceFrame], str]:
     if log_dir is not None:
         frames = log_frames(log_dir)
         return frames, f"{len(frames)} frames of {log_dir}"
@@ -74,7 +58,7 @@ def _load_frames(log_dir: Path | None) -> tuple[list[Frame], str]:
 
 def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Any = None) -> dict[str, Any]:
     """One client: warm up, wait for the others, then ``frames_n`` timed exchanges."""
-    frames, _ = _load_frames(log_dir)
+    frames, _ = load_frames(log_dir)
     payloads = [f.payload() for f in frames]
     rtts = np.empty(frames_n)
     with UnityWireClient(url, timeout=30.0) as client:
@@ -149,7 +133,7 @@ def format_table(result: BenchResult) -> str:
     return "\n".join(rows)
 
 
-def _bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir: Path | None) -> BenchResult:
+def bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir: Path | None) -> BenchResult:
     if args.server:
         rtts, rate = drive(args.server, log_dir, args.clients, args.frames, args.warmup)
         return BenchResult(label, "(external server)", args.clients, args.frames, args.warmup,
@@ -170,47 +154,3 @@ def _bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir
     stats.pop("clients", None)
     return BenchResult(label, str(model), args.clients, args.frames, args.warmup, _percentiles_ms(rtts),
                        round(rate, 1), stats, args.workers)
-
-
-def run(args: argparse.Namespace) -> int:
-    if args.clients < 1 or args.frames < 1 or args.warmup < 0:
-        log.error("--clients and --frames must be >= 1, --warmup >= 0")
-        return 2
-    frames, source = _load_frames(args.log)
-    with tempfile.TemporaryDirectory(prefix="rbc_bench_models_") as tmp:
-        if args.server:
-            models: list[tuple[str, Path | None]] = [("external", None)]
-        elif args.model is not None:
-            models = [(args.model.stem, args.model)]
-        else:
-            try:
-                from tools.onnx_builders import ARCHS, save_model
-            except ModuleNotFoundError as exc:
-                log.error("%s", exc)
-                return 2
-            names = ["shallow", "pilotnet"] if args.arch == "both" else [args.arch]
-            try:
-                models = [(f"{n} (random weights, {ARCHS[n].params:,} params)",
-                           save_model(n, Path(tmp) / f"{n}.onnx")) for n in names]
-            except ModuleNotFoundError as exc:
-                log.error("%s", exc)
-                return 2
-        results = []
-        for label, model in models:
-            workers = "" if args.server or args.workers == 1 else f", server with {args.workers} workers"
-            print(f"\n== {label}: {args.clients} client(s) x {args.frames} frames (+{args.warmup} warm-up), "
-                  f"{source}{workers}")
-            try:
-                result = _bench_one(args, label, model, args.log)
-            except (ServerStartError, RuntimeError, OSError) as exc:
-                log.error("benchmark failed: %s", exc)
-                return 1
-            print(format_table(result))
-            results.append(result)
-    if args.json is not None:
-        from models.runfiles import write_json
-
-        write_json(args.json, {"frames_source": source, "runs": [asdict(r) for r in results]})
-        print(f"\nwrote {args.json}")
-    del frames
-    return 0

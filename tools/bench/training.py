@@ -19,23 +19,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from models.behavior import Approach, Arch, Behavior, pipeline_for
+from models.behavior import pipeline_for
 
 PAPER_TRAIN_SAMPLES = 9680
 PAPER_TOTAL_SAMPLES = 12101
 TARGET_S = 600.0
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--data", action="append", default=[], metavar="DIR",
-                        help="recording(s) whose frames are repeated to the paper's size (default: synthetic frames)")
-    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default="simplistic")
-    parser.add_argument("--arch", choices=[a.value for a in Arch], default="shallow")
-    parser.add_argument("--approach", choices=[a.value for a in Approach], default="ours")
-    parser.add_argument("--steps", type=int, default=150, help="batches per measurement")
-    parser.add_argument("--repeat", type=int, default=3, help="measurements per figure (median reported)")
-    parser.add_argument("--threads", type=int, help="PyTorch threads (default: as rbc train)")
-    parser.add_argument("--seed", type=int, default=0)
 
 
 @dataclass
@@ -51,7 +39,7 @@ class Rate:
         return f"{self.median:8.0f} samples/s  (range {lo:.0f}-{hi:.0f} over {len(self.samples_per_s)} runs)"
 
 
-def run(args: argparse.Namespace) -> int:
+def benchmark(args: argparse.Namespace) -> int:
     import torch
 
     from models.batches import Prefetcher, TrainingSet, epoch_batches

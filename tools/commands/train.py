@@ -5,20 +5,25 @@ from __future__ import annotations
 import argparse
 
 from models.behavior import Approach, Arch, Behavior
+from models.train_config import TrainConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", default=[], metavar="DIR",
                         help="recording directory or driving log (repeat to combine several)")
-    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default="simplistic")
-    parser.add_argument("--arch", choices=[a.value for a in Arch], default="shallow")
-    parser.add_argument("--approach", choices=[a.value for a in Approach], default="ours",
+    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default=TrainConfig.behavior,
+                        help="driving behavior: sets zero-steer balancing, augmentations and epochs (paper Tables 4-6)")
+    parser.add_argument("--arch", choices=[a.value for a in Arch], default=TrainConfig.arch,
+                        help="network: the paper's shallow CNN or NVIDIA's PilotNet")
+    parser.add_argument("--approach", choices=[a.value for a in Approach], default=TrainConfig.approach,
                         help="ours: the paper's balancing + augmentation; nvidia: crop/YUV, no balancing")
     parser.add_argument("--out", required=True, metavar="RUN_DIR", help="run directory (config, history, model)")
     parser.add_argument("--epochs", type=int, help="default: the paper's 5 / 10 / 5 by behavior")
-    parser.add_argument("--aug-loops", type=int, default=64, help="augmentation loops chi (default 64)")
-    parser.add_argument("--batch-size", type=int, default=256)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--aug-loops", type=int, default=TrainConfig.aug_loops,
+                        help="augmentation loops chi: passes over the training data per epoch (default %(default)s)")
+    parser.add_argument("--batch-size", type=int, default=TrainConfig.batch_size, help="default %(default)s")
+    parser.add_argument("--seed", type=int, default=TrainConfig.seed, help="split, balancing, augmentation and "
+                        "initialisation seed (default %(default)s)")
     parser.add_argument("--max-steps-per-epoch", type=int, help="cap steps per epoch (quick runs)")
     parser.add_argument("--threads", type=int,
                         help="PyTorch threads (default: cores - 1 for the shallow CNN, whose batches need a core of "
@@ -29,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from models.train import RunDirError, TrainConfig, train
+    from models.train import RunDirError, train
 
     if not args.data and not args.resume:
         print("rbc train: give at least one --data DIR")

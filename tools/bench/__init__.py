@@ -1,0 +1,1 @@
+"""Benchmarks (latency, simulator, training) and the random-weight networks they and the tests drive."""

@@ -1,0 +1,1 @@
+"""One module per ``rbc`` subcommand, named after it: ``add_arguments(parser)`` and ``run(args)`` only."""

@@ -1,0 +1,55 @@
+"""``rbc inspect``: analysis pictures of a training run (library: :mod:`models.inspection`).
+
+Named ``inspect_run`` rather than after the subcommand so that it never shadows the standard library."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from models import runfiles
+from models.inspection import LAP_FRAMES, plot_activations, plot_histograms, plot_loss, plot_predictions
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="directory written by rbc train")
+    parser.add_argument("--data", action="append", metavar="DIR",
+                        help="recordings (default: those of the run; the split shown is then of these)")
+    parser.add_argument("--frames", type=int, default=LAP_FRAMES, help="consecutive frames for the prediction plot")
+    parser.add_argument("--samples", type=int, default=4, help="frames shown with their activation maps")
+
+
+def run(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import torch
+
+    from models.behavior import pipeline_for
+    from models.nets import build_model
+    from models.train import TrainConfig
+    from models.trainingdata import prepare_data
+
+    run_dir: Path = args.run_dir
+    record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
+    config = TrainConfig.from_dict(record["config"])
+    pipeline = pipeline_for(config.behavior, config.arch, config.approach)
+    data = prepare_data(args.data or config.data, pipeline, config.seed, config.val_fraction)
+    out = run_dir / "inspect"
+    out.mkdir(parents=True, exist_ok=True)
+    written = [plot_histograms(out, data, pipeline, config.seed)]
+    if (run_dir / runfiles.HISTORY).exists():
+        written.append(plot_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY)))
+    model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
+    checkpoint = run_dir / runfiles.CHECKPOINT
+    if checkpoint.exists():
+        model.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["model"])
+    model.eval()
+    path, mse = plot_predictions(out, data, pipeline, model, run_dir / runfiles.MODEL, args.frames)
+    written.append(path)
+    written.append(plot_activations(out, data, pipeline, model, args.samples, config.seed))
+    for p in written:
+        print(p)
+    print(f"prediction MSE over the plotted frames: {mse:.5f}")
+    return 0
