@@ -10,8 +10,8 @@ import pytest
 from helpers_server import SAMPLE_LOG
 
 from protocol import FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG, decode_image, parse_telemetry
-from tools.wire.frames import cycle_payloads, log_frames, synthetic_frames
 from protocol.websocket import xor_mask as mask_payload
+from tools.wire.frames import cycle_payloads, log_frames, synthetic_frames
 from tools.wire.unity_client import UnityWireClient, _frame, _json_string
 
 

@@ -14,7 +14,9 @@ from tests.conftest import write_stadium
 from tools.sim.autopilot import AutopilotParams
 from tools.sim.drivers import AutopilotDriver, Frame, LocalDriver, Scene
 from tools.sim.rules import DEFAULT_RULES, Cause, Referee, Rules, angle_diff, body_hits, degree_of_autonomy
-from tools.sim.session import ScenarioConfig, Simulation, run_scenario
+from tools.sim.scenario import ScenarioConfig
+from tools.sim.session import run_scenario
+from tools.sim.simulation import Simulation
 from tools.sim.vehicle import kmh_to_mps, mps_to_kmh
 
 

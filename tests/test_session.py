@@ -16,7 +16,8 @@ import pytest
 
 from protocol import SteerCommand
 from tools.sim.drivers import AutopilotDriver, Frame, LocalDriver, OnnxDriver, Reply, Scene, SocketDriver
-from tools.sim.session import PIPELINE_DEPTH, ScenarioConfig, run_scenario
+from tools.sim.scenario import ScenarioConfig
+from tools.sim.session import PIPELINE_DEPTH, run_scenario
 
 
 @pytest.mark.parametrize("overrides", [

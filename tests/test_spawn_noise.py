@@ -1,6 +1,7 @@
 """Seeds perturb the spawn only when asked (rbc eval), never seed 0, always reproducibly."""
 
-from tools.sim.session import ScenarioConfig, Simulation
+from tools.sim.scenario import ScenarioConfig
+from tools.sim.simulation import Simulation
 
 
 def pose(**kw):

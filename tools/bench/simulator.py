@@ -19,8 +19,9 @@ import cv2
 import numpy as np
 
 from protocol.facts import JPEG_QUALITY
+from tools.sim.cones import place_cones
 from tools.sim.render import Renderer
-from tools.sim.track import Track, place_cones
+from tools.sim.track import Track
 from tools.sim.world import Pose, clear_caches, get_world
 
 log = logging.getLogger(__name__)
@@ -115,7 +116,8 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
 
     from drive_server.models_dir import default_model_path
     from tools.sim.drivers import SocketDriver
-    from tools.sim.session import ScenarioConfig, run_scenario
+    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.session import run_scenario
     from tools.wire.server_process import ServerProcess
 
     with tempfile.TemporaryDirectory(prefix="rbc_simbench_") as tmp:

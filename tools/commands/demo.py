@@ -45,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
     from drive_server.runrecords import write_json
     from tools.console import Progress
     from tools.sim.drivers import SocketDriver
-    from tools.sim.session import ScenarioConfig, run_scenario
+    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.session import run_scenario
     from tools.sim.summary import print_summary
     from tools.sim.viz import StripCollector, write_trajectory_map
     from tools.wire.server_process import ServerProcess, ServerStartError

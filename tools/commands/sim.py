@@ -60,7 +60,9 @@ def _driver(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.sim.session import ScenarioConfig, get_track, run_scenario
+    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.session import run_scenario
+    from tools.sim.track_file import get_track
 
     spawn_s = args.spawn_s
     if args.spawn_frac is not None:

@@ -11,7 +11,8 @@ from pathlib import Path
 import cv2
 
 from tools.bench.simulator import bench_track, lap_wall_time, write_sheet
-from tools.sim.track import load_track, place_cones
+from tools.sim.cones import place_cones
+from tools.sim.track_file import load_track
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

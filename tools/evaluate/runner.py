@@ -71,7 +71,8 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
 
     cv2.setNumThreads(1)
     from tools.evaluate.experiments import is_autonomous
-    from tools.sim.session import ScenarioConfig, run_scenario
+    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.session import run_scenario
 
     config = ScenarioConfig(**task.scenario)
     started = time.perf_counter()

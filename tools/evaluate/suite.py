@@ -49,7 +49,7 @@ def base_scenario(cfg: SuiteConfig) -> dict[str, Any]:
 def _scenario_for(exp: Experiment, value: Any, cfg: SuiteConfig, seed: int) -> dict[str, Any]:
     scenario = {**base_scenario(cfg), **exp.fixed, "seed": seed, "realtime": exp.realtime, "spawn_noise": True}
     if exp.parameter == "spawn_fraction":
-        from tools.sim.track import load_track
+        from tools.sim.track_file import load_track
 
         scenario["spawn_s"] = float(value) * load_track(scenario["track"]).length
     elif exp.parameter is not None:

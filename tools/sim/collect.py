@@ -28,7 +28,8 @@ from protocol.jpeg import encode_jpeg
 from protocol.units import from_kmh
 from tools.sim.autopilot import Autopilot, AutopilotParams
 from tools.sim.rules import LapResult
-from tools.sim.session import ScenarioConfig, Simulation
+from tools.sim.scenario import ScenarioConfig
+from tools.sim.simulation import Simulation
 
 log = logging.getLogger(__name__)
 

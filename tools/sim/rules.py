@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from tools.sim.track import CONE_RADIUS, Projection, Track
+from tools.sim.cones import CONE_RADIUS
+from tools.sim.track import Projection, Track
 from tools.sim.vehicle import kmh_to_mps
 
 

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tools.sim.cones import CONE_HEIGHT, CONE_RADIUS
 from tools.sim.texture import DECK_EXTRA, SHIFT, GroundAlbedo, surface_runs
-from tools.sim.track import CONE_HEIGHT, CONE_RADIUS, Track
+from tools.sim.track import Track
 
 BROADLEAF, CONIFER = 0, 1
 RAIL_HEIGHT = 1.0  # metres, top rail of the bridge

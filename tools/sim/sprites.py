@@ -15,9 +15,9 @@ import numpy as np
 
 from protocol.facts import FRAME_WIDTH
 from tools.sim.camera import CameraModel, fog_weight
+from tools.sim.cones import CONE_HEIGHT, CONE_RADIUS
 from tools.sim.scenery import CONIFER, RAIL_HEIGHT, TCROWN_R, TCROWN_Z, TH, TKIND, TTINT, TTRUNK_R
 from tools.sim.sky import SKY_DIRECT_SHARE
-from tools.sim.track import CONE_HEIGHT, CONE_RADIUS
 from tools.sim.world import World
 
 VIEW_DISTANCE = {"meadow": 110.0, "forest": 85.0}  # metres; further props are left to the haze and panorama

@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tools.sim.session import FrameEvent, RunResult
+from tools.sim.scenario import FrameEvent, RunResult
 from tools.sim.track import Track
 from tools.sim.vehicle import mps_to_kmh
 
@@ -83,7 +83,7 @@ def _draw_road(img: np.ndarray, view: _View, track: Track) -> None:
 
 def write_trajectory_map(result: RunResult, path: str | Path, size: int = 1000) -> Path:
     """Top-down map of the run: road, trajectory coloured by |cross-track error|, interventions, legend."""
-    from tools.sim.session import get_track
+    from tools.sim.track_file import get_track
 
     track = get_track(result.config.track)
     trace = result.trace

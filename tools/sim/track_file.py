@@ -1,0 +1,288 @@
+"""The track file format: read, validate and load a JSON track file into a :class:`~tools.sim.track.Track`.
+
+The format is documented in :func:`parse_track`; every problem raises :class:`~tools.sim.track.TrackError`
+naming the file. Tracks are immutable, so each is loaded once per process (:func:`get_track`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tools.sim.spline import resample_loop
+from tools.sim.track import (
+    MIN_TURN_RADIUS,
+    SURFACE_KINDS,
+    THEMES,
+    CameraJitter,
+    PoleSpec,
+    Scenery,
+    Surface,
+    Track,
+    TrackError,
+    TreeSpec,
+    WaterSpec,
+)
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+
+
+_TOP_KEYS = {"name", "version", "description", "centerline", "road_width", "lanes", "shoulder_width",
+             "surfaces", "scenery", "sun", "start", "camera_jitter"}
+
+
+_REQUIRED = ("name", "version", "centerline", "road_width")
+
+
+def builtin_tracks() -> list[str]:
+    """Names of the tracks shipped in ``tools/sim/tracks``."""
+    folder = resources.files("tools.sim") / "tracks"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+def load_track(name_or_path: str | Path) -> Track:
+    """Load a built-in track by name (``lake``, ``mountain``) or any track file by path."""
+    text = str(name_or_path)
+    if isinstance(name_or_path, str) and text in builtin_tracks():
+        res = resources.files("tools.sim") / "tracks" / f"{text}.json"
+        return _load_text(res.read_text(encoding="utf-8"), f"builtin:{text}")
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise TrackError(f"{path}: no such track file (built-in tracks: {', '.join(builtin_tracks())})")
+    return _load_text(path.read_text(encoding="utf-8"), str(path))
+
+
+def _load_text(text: str, source: str) -> Track:
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TrackError(f"{source}: not valid JSON ({exc})") from None
+    return parse_track(data, source)
+
+
+def parse_track(data: Any, source: str = "<dict>") -> Track:
+    """Validate a decoded track definition and build the :class:`Track`.
+
+    Keys: ``name``, ``version`` (1), ``centerline`` ([[x, y], ...] metres, at least 4 points, closed,
+    driving direction = point order), ``road_width`` (edge line to edge line) are required;
+    ``description``, ``lanes`` (1, or 2 with a dashed centre line), ``shoulder_width``, ``surfaces``
+    ([{from_s, to_s, kind}]), ``scenery`` ({theme, trees, poles, water, kerbs}), ``sun``
+    ({azimuth_deg, elevation_deg}), ``start`` ({s}) and ``camera_jitter`` ({pitch_deg, roll_deg}) are
+    optional. Every problem raises :class:`TrackError` naming ``source``.
+    """
+    r = _Reader(source)
+    if not isinstance(data, dict):
+        r.fail(f"top level must be a JSON object, got {type(data).__name__}")
+    for key in _REQUIRED:
+        if key not in data:
+            r.fail(f"missing key {key!r}")
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        r.fail(f"unknown key(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    if data["version"] != FORMAT_VERSION:
+        r.fail(f"unsupported version {data['version']!r} (this simulator reads version {FORMAT_VERSION})")
+    name = data["name"]
+    if not isinstance(name, str) or not name:
+        r.fail("'name' must be a non-empty string")
+    road_width = r.number(data, "road_width", lo=2.0, hi=30.0)
+    lanes = data.get("lanes", 1)
+    if lanes not in (1, 2) or isinstance(lanes, bool):
+        r.fail(f"'lanes' must be 1 or 2, got {lanes!r}")
+    shoulder = r.number(data, "shoulder_width", 1.0, lo=0.0, hi=10.0)
+    control = _control_points(data["centerline"], r)
+
+    pts, tan, curv, length = resample_loop(control)
+    s = np.arange(len(pts)) * (length / len(pts))
+    normals = np.stack([-tan[:, 1], tan[:, 0]], 1)
+    need = max(MIN_TURN_RADIUS, road_width / 2 + shoulder + 1.0)
+    k = int(np.argmax(np.abs(curv)))
+    if 1.0 / max(abs(curv[k]), 1e-12) < need:
+        r.fail(f"curve radius {1 / abs(curv[k]):.1f} m at s={s[k]:.0f} m (near x={pts[k, 0]:.1f}, "
+               f"y={pts[k, 1]:.1f}) is below the {need:.1f} m this road width and shoulder need")
+    _check_overlap(pts, s, length, road_width + 2 * shoulder, r)
+
+    surfaces = tuple(_surface(item, i, length, r) for i, item in enumerate(r.list(data, "surfaces")))
+    scenery = _scenery(r.obj(data, "scenery"), r)
+    sun = r.obj(data, "sun")
+    r.keys(sun, "sun", {"azimuth_deg", "elevation_deg"})
+    start = r.obj(data, "start")
+    r.keys(start, "start", {"s"})
+    jit = r.obj(data, "camera_jitter")
+    r.keys(jit, "camera_jitter", {"pitch_deg", "roll_deg"})
+    digest = hashlib.sha1(json.dumps({k: data[k] for k in sorted(data) if k != "description"},
+                                     sort_keys=True).encode()).hexdigest()[:16]
+    return Track(
+        name=name, road_width=road_width, lanes=int(lanes), shoulder_width=shoulder, surfaces=surfaces,
+        scenery=scenery,
+        sun_azimuth_deg=r.number(sun, "azimuth_deg", 220.0, lo=-360.0, hi=360.0, where="sun"),
+        sun_elevation_deg=r.number(sun, "elevation_deg", 40.0, lo=5.0, hi=90.0, where="sun"),
+        start_s=r.number(start, "s", 0.0, where="start") % length,
+        camera_jitter=CameraJitter(r.number(jit, "pitch_deg", 0.0, lo=0.0, hi=10.0, where="camera_jitter"),
+                                   r.number(jit, "roll_deg", 0.0, lo=0.0, hi=10.0, where="camera_jitter")),
+        centerline=pts, tangents=tan, normals=normals, curvature=curv, s=s, length=float(length),
+        source=source, description=str(data.get("description", "")), digest=digest,
+    )
+
+
+class _Reader:
+    """Small typed accessors that turn bad values into TrackErrors naming the file."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, problem: str):
+        raise TrackError(f"{self.source}: {problem}")
+
+    def number(self, obj: dict, key: str, default: float | None = None, *, lo: float = -math.inf,
+               hi: float = math.inf, where: str = "") -> float:
+        label = f"{where}.{key}" if where else key
+        if key not in obj:
+            if default is None:
+                self.fail(f"missing key {label!r}")
+            return float(default)
+        v = obj[key]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            self.fail(f"{label!r} must be a number, got {v!r}")
+        if not lo <= v <= hi:
+            self.fail(f"{label!r} = {v} is outside [{lo:g}, {hi:g}]")
+        return float(v)
+
+    def obj(self, data: dict, key: str) -> dict:
+        v = data.get(key, {})
+        if not isinstance(v, dict):
+            self.fail(f"{key!r} must be a JSON object, got {type(v).__name__}")
+        return v
+
+    def list(self, data: dict, key: str) -> list:
+        v = data.get(key, [])
+        if not isinstance(v, list):
+            self.fail(f"{key!r} must be a list, got {type(v).__name__}")
+        return v
+
+    def keys(self, obj: dict, where: str, allowed: set[str]) -> None:
+        unknown = sorted(set(obj) - allowed)
+        if unknown:
+            self.fail(f"unknown key(s) {', '.join(map(repr, unknown))} in {where!r} "
+                      f"(allowed: {', '.join(sorted(allowed))})")
+
+
+def _control_points(raw: Any, r: _Reader) -> np.ndarray:
+    if not isinstance(raw, list):
+        r.fail("'centerline' must be a list of [x, y] points")
+    for i, p in enumerate(raw):
+        if (not isinstance(p, list | tuple) or len(p) != 2
+                or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in p)):
+            r.fail(f"centerline point {i} must be [x, y] with finite numbers, got {p!r}")
+    pts = np.asarray(raw, dtype=np.float64).reshape(-1, 2)
+    if len(pts) >= 2 and np.allclose(pts[0], pts[-1]):
+        log.debug("%s: last centre-line point repeats the first; dropping it", r.source)
+        pts = pts[:-1]
+    if len(pts) < 4:
+        r.fail(f"centerline needs at least 4 points for a closed loop, got {len(pts)}")
+    step = np.linalg.norm(np.roll(pts, -1, 0) - pts, axis=1)
+    if step.min() < 1e-3:
+        i = int(np.argmin(step))
+        r.fail(f"centerline points {i} and {(i + 1) % len(pts)} coincide")
+    return pts
+
+
+def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: float, r: _Reader) -> None:
+    """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself.
+
+    Points further apart along the line than pi/2 * clearance must be at least ``clearance`` apart in
+    space; with curve radii >= clearance / 2 (checked before) closer pairs are always far enough apart.
+    """
+    step = max(1, int(1.0 / (length / len(pts))))  # check on a ~1 m grid
+    p, ss = pts[::step], s[::step]
+    gap = math.pi / 2 * clearance
+    for lo in range(0, len(p), 512):
+        d = np.linalg.norm(p[lo:lo + 512, None] - p[None], axis=2)
+        along = np.abs(ss[lo:lo + 512, None] - ss[None])
+        along = np.minimum(along, length - along)
+        bad = (along > gap) & (d < clearance - 1e-6)
+        if bad.any():
+            i, j = np.unravel_index(int(np.argmin(np.where(bad, d, np.inf))), d.shape)
+            i += lo
+            what = "crosses itself" if d[i - lo, j] < 0.5 else "overlaps itself"
+            r.fail(f"road {what} near s={ss[i]:.0f} m and s={ss[j]:.0f} m (x={p[i, 0]:.1f}, y={p[i, 1]:.1f}): "
+                   f"centre lines {d[i - lo, j]:.1f} m apart, road plus shoulders need {clearance:.1f} m")
+
+
+def _surface(item: Any, i: int, length: float, r: _Reader) -> Surface:
+    if not isinstance(item, dict):
+        r.fail(f"surfaces[{i}] must be an object with from_s, to_s, kind")
+    r.keys(item, f"surfaces[{i}]", {"from_s", "to_s", "kind"})
+    kind = item.get("kind", "asphalt")
+    if kind not in SURFACE_KINDS:
+        r.fail(f"surfaces[{i}]: unknown surface kind {kind!r} (known: {', '.join(SURFACE_KINDS)})")
+    a = r.number(item, "from_s", lo=0.0, where=f"surfaces[{i}]")
+    b = r.number(item, "to_s", lo=0.0, where=f"surfaces[{i}]")
+    if a > length + 1e-6 or b > length + 1e-6:
+        r.fail(f"surfaces[{i}]: from_s/to_s must lie within the track length {length:.1f} m")
+    if a == b:
+        r.fail(f"surfaces[{i}]: from_s equals to_s (empty stretch)")
+    return Surface(a, b, kind)
+
+
+def _scenery(raw: dict, r: _Reader) -> Scenery:
+    r.keys(raw, "scenery", {"theme", "trees", "poles", "water", "kerbs"})
+    theme = raw.get("theme", "meadow")
+    if theme not in THEMES:
+        r.fail(f"scenery.theme: unknown theme {theme!r} (known: {', '.join(THEMES)})")
+    t = r.obj(raw, "trees")
+    r.keys(t, "scenery.trees", {"count", "seed", "min_offset", "max_offset", "min_height", "max_height"})
+    w = "scenery.trees"
+    trees = TreeSpec(
+        count=int(r.number(t, "count", 0, lo=0, hi=5000, where=w)), seed=int(r.number(t, "seed", 0, where=w)),
+        min_offset=r.number(t, "min_offset", 7.0, lo=0.0, where=w),
+        max_offset=r.number(t, "max_offset", 40.0, lo=0.0, hi=500.0, where=w),
+        min_height=r.number(t, "min_height", 4.0, lo=1.0, hi=40.0, where=w),
+        max_height=r.number(t, "max_height", 9.0, lo=1.0, hi=40.0, where=w))
+    if trees.max_offset < trees.min_offset or trees.max_height < trees.min_height:
+        r.fail("scenery.trees: max_offset/max_height must not be below min_offset/min_height")
+    p = r.obj(raw, "poles")
+    r.keys(p, "scenery.poles", {"spacing", "offset", "height"})
+    poles = PoleSpec(spacing=r.number(p, "spacing", 0.0, lo=0.0, where="scenery.poles"),
+                     offset=r.number(p, "offset", -5.5, where="scenery.poles"),
+                     height=r.number(p, "height", 6.0, lo=1.0, hi=30.0, where="scenery.poles"))
+    water = []
+    for i, item in enumerate(r.list(raw, "water")):
+        where = f"scenery.water[{i}]"
+        if not isinstance(item, dict):
+            r.fail(f"{where} must be an object with center, radius, angle_deg")
+        r.keys(item, where, {"center", "radius", "angle_deg"})
+        pair = []
+        for key in ("center", "radius"):
+            v = item.get(key)
+            if (not isinstance(v, list) or len(v) != 2
+                    or not all(isinstance(c, int | float) and not isinstance(c, bool) for c in v)):
+                r.fail(f"{where}.{key} must be [a, b] numbers, got {v!r}")
+            pair.append((float(v[0]), float(v[1])))
+        if min(pair[1]) <= 0:
+            r.fail(f"{where}.radius must be positive")
+        water.append(WaterSpec(pair[0], pair[1], r.number(item, "angle_deg", 0.0, where=where)))
+    kerbs = raw.get("kerbs", False)
+    if not isinstance(kerbs, bool):
+        r.fail(f"scenery.kerbs must be true or false, got {kerbs!r}")
+    return Scenery(theme=theme, trees=trees, poles=poles, water=tuple(water), kerbs=kerbs)
+
+
+@lru_cache(maxsize=16)
+def _load_track(name: str, mtime: float) -> Track:
+    return load_track(name)
+
+
+def get_track(name: str) -> Track:
+    """Load a track once per process (tracks are immutable); a changed file is re-read."""
+    path = Path(name)
+    return _load_track(name, path.stat().st_mtime if path.is_file() else 0.0)
