@@ -29,19 +29,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ONNX model (default: the bundled models/pretrained/simplistic.onnx)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default: localhost only)")
     p.add_argument("--port", type=int, default=4567, help="port (default 4567, the simulator's; 0 = any free)")
-    p.add_argument("--speed-limit", type=float, default=25.0, help="v_l of Eq. 14 in km/h (default 25)")
-    p.add_argument("--steer-limit", type=float, default=25.0,
-                   help="steering limit in degrees: scales the model's -1..1 output and is delta of Eq. 14")
-    p.add_argument("--tau", type=float, default=1.0, help="tau of Eq. 14, in [0, 1] (default 1)")
-    p.add_argument("--telemetry-speed-unit", choices=[u.value for u in SpeedUnit], default=SpeedUnit.MPH.value,
+    drive, inference, fallback = DriveConfig, InferenceConfig, FallbackPolicy  # the defaults, defined once
+    p.add_argument("--speed-limit", type=float, default=drive.speed_limit_kmh,
+                   help="v_l of Eq. 14 in km/h (default %(default)s)")
+    p.add_argument("--steer-limit", type=float, default=drive.steer_limit_deg,
+                   help="steering limit in degrees: scales the model's -1..1 output and is delta of Eq. 14 "
+                        "(default %(default)s)")
+    p.add_argument("--tau", type=float, default=drive.tau, help="tau of Eq. 14, in [0, 1] (default %(default)s)")
+    p.add_argument("--telemetry-speed-unit", choices=[u.value for u in SpeedUnit], default=drive.speed_unit.value,
                    help="unit of the telemetry speed: mph (stock Udacity simulator, default) or kmh (paper's)")
-    p.add_argument("--threads", type=int, default=1, help="ONNX Runtime intra-op threads (default 1)")
-    p.add_argument("--provider", default="CPUExecutionProvider", help="ONNX Runtime execution provider")
+    p.add_argument("--threads", type=int, default=inference.threads,
+                   help="ONNX Runtime intra-op threads (default %(default)s)")
+    p.add_argument("--provider", default=inference.provider,
+                   help="ONNX Runtime execution provider (default %(default)s)")
     p.add_argument("--stats-json", type=Path, default=None, help="write latency statistics here at exit")
     p.add_argument("--log-every", type=float, default=10.0,
                    help="seconds between one-line latency summaries (0: only at exit)")
-    p.add_argument("--hold-frames", type=int, default=3,
-                   help="malformed frames answered with the last good command before a controlled stop")
+    p.add_argument("--hold-frames", type=int, default=fallback.hold_frames,
+                   help="malformed frames answered with the last good command before a controlled stop "
+                        "(default %(default)s)")
     p.add_argument("--workers", type=int, default=1,
                    help="server processes sharing the port (several simulators at once; WebSocket transport "
                         "only when > 1; POSIX only). Default 1")

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from protocol import MAX_STEERING_DEG
+from protocol.facts import DEPLOY_SPEED_KMH, MAX_STEERING_DEG
 
 
 @dataclass(frozen=True)
 class ControlLaw:
     """Parameters of Eq. 14. Speeds in km/h, angles in degrees."""
 
-    speed_limit_kmh: float = 25.0
+    speed_limit_kmh: float = DEPLOY_SPEED_KMH
     steer_limit_deg: float = MAX_STEERING_DEG
     tau: float = 1.0
 

@@ -26,9 +26,9 @@ class InferenceError(RuntimeError):
 class DriveConfig:
     """Control-law parameters and the unit of the telemetry speed (mph: the stock simulator)."""
 
-    speed_limit_kmh: float = 25.0
-    steer_limit_deg: float = 25.0
-    tau: float = 1.0
+    speed_limit_kmh: float = ControlLaw.speed_limit_kmh
+    steer_limit_deg: float = ControlLaw.steer_limit_deg
+    tau: float = ControlLaw.tau
     speed_unit: SpeedUnit = SpeedUnit.MPH
 
     def control_law(self) -> ControlLaw:

@@ -1,4 +1,5 @@
-"""The paper's shallow CNN (14,065 parameters) and NVIDIA's PilotNet (252,219), in PyTorch.
+"""The paper's shallow CNN (14,065 parameters) and NVIDIA's PilotNet (252,219), in PyTorch, built from
+the layer table of :mod:`models.architectures`.
 
 Both take NCHW float32 input, the layout CPU convolutions are fastest with; ``ContractInput`` wraps
 a network so the exported ONNX model takes exactly the layout its preprocessing contract states
@@ -10,6 +11,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from models.architectures import ARCHITECTURES, PILOTNET, SHALLOW, Architecture
 from models.behavior import Arch
 
 
@@ -22,54 +24,43 @@ def _init_glorot(module: nn.Module) -> None:
                 nn.init.zeros_(m.bias)
 
 
-class ShallowCNN(nn.Module):
+class TableNet(nn.Module):
+    """A network built from a layer table of :mod:`models.architectures` (``features`` then ``head``).
+
+    The submodule order (conv, ReLU, ...; flatten, linear, ReLU[, dropout], ..., linear) is what the
+    checkpoints' state-dict keys and :func:`conv_activations` rely on.
+    """
+
+    def __init__(self, spec: Architecture, height: int | None = None, width: int | None = None) -> None:
+        super().__init__()
+        height, width = height or spec.height, width or spec.width
+        layers: list[nn.Module] = []
+        channels = 3
+        for conv in spec.convs:
+            layers += [nn.Conv2d(channels, conv.filters, conv.kernel, stride=conv.stride), nn.ReLU()]
+            channels = conv.filters
+        self.features = nn.Sequential(*layers)
+        head: list[nn.Module] = [nn.Flatten()]
+        features = _flat_size(self.features, height, width)
+        for units in spec.dense:
+            head += [nn.Linear(features, units), nn.ReLU()] + ([nn.Dropout(spec.dropout)] if spec.dropout else [])
+            features = units
+        self.head = nn.Sequential(*head, nn.Linear(features, 1))
+        self.spec = spec
+        _init_glorot(self)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.features(x))
+
+
+def ShallowCNN(height: int = 64, width: int = 64) -> TableNet:  # noqa: N802 (reads like the class it was)
     """Paper Fig. 11: 3 strided convolutions (11x11/5, 5x5/2, 3x3/2) and 3 dropout-regularised dense layers."""
-
-    def __init__(self, height: int = 64, width: int = 64, dropout: float = 0.25) -> None:
-        super().__init__()
-        self.features = nn.Sequential(
-            nn.Conv2d(3, 8, 11, stride=5), nn.ReLU(),
-            nn.Conv2d(8, 16, 5, stride=2), nn.ReLU(),
-            nn.Conv2d(16, 32, 3, stride=2), nn.ReLU(),
-        )
-        flat = _flat_size(self.features, height, width)
-        self.head = nn.Sequential(
-            nn.Flatten(),
-            nn.Linear(flat, 64), nn.ReLU(), nn.Dropout(dropout),
-            nn.Linear(64, 16), nn.ReLU(), nn.Dropout(dropout),
-            nn.Linear(16, 8), nn.ReLU(), nn.Dropout(dropout),
-            nn.Linear(8, 1),
-        )
-        _init_glorot(self)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(x))
+    return TableNet(SHALLOW, height, width)
 
 
-class PilotNet(nn.Module):
-    """NVIDIA's PilotNet (Bojarski et al. 2016) for 66x200 input: 5 convolutions, 4 dense layers."""
-
-    def __init__(self, height: int = 66, width: int = 200) -> None:
-        super().__init__()
-        self.features = nn.Sequential(
-            nn.Conv2d(3, 24, 5, stride=2), nn.ReLU(),
-            nn.Conv2d(24, 36, 5, stride=2), nn.ReLU(),
-            nn.Conv2d(36, 48, 5, stride=2), nn.ReLU(),
-            nn.Conv2d(48, 64, 3), nn.ReLU(),
-            nn.Conv2d(64, 64, 3), nn.ReLU(),
-        )
-        flat = _flat_size(self.features, height, width)
-        self.head = nn.Sequential(
-            nn.Flatten(),
-            nn.Linear(flat, 100), nn.ReLU(),
-            nn.Linear(100, 50), nn.ReLU(),
-            nn.Linear(50, 10), nn.ReLU(),
-            nn.Linear(10, 1),
-        )
-        _init_glorot(self)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(x))
+def PilotNet(height: int = 66, width: int = 200) -> TableNet:  # noqa: N802
+    """NVIDIA's PilotNet for 66x200 input: 5 convolutions, 4 dense layers."""
+    return TableNet(PILOTNET, height, width)
 
 
 class ContractInput(nn.Module):
@@ -93,10 +84,7 @@ def _flat_size(features: nn.Module, height: int, width: int) -> int:
 
 def build_model(arch: Arch | str, height: int, width: int) -> nn.Module:
     """A freshly initialised network for the contract's input size."""
-    arch = Arch(arch)
-    if arch is Arch.SHALLOW:
-        return ShallowCNN(height, width)
-    return PilotNet(height, width)
+    return TableNet(ARCHITECTURES[Arch(arch).value], height, width)
 
 
 def count_parameters(model: nn.Module) -> int:

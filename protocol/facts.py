@@ -15,3 +15,6 @@ CAMERAS = ("center", "left", "right")
 BEHAVIORS = ("simplistic", "rigorous", "collision")
 #: File signatures accepted as camera frames (Unity writes JPEG; some recorders PNG).
 IMAGE_MAGIC = (b"\xff\xd8", b"\x89PNG")
+#: The paper's speeds: data collected at 30 km/h, models deployed at 25 km/h (the default speed limit).
+COLLECT_SPEED_KMH = 30.0
+DEPLOY_SPEED_KMH = 25.0

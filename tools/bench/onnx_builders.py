@@ -1,47 +1,26 @@
 """ONNX graphs of the paper's networks with random weights, built with ``onnx.helper`` (no torch).
 
 Why: latency benchmarks and tests need real-shaped models on installs without torch, and the tests
-must not depend on binary fixtures. The graphs match the architectures exactly (parameter counts are
-asserted) and carry the preprocessing contract in their metadata like a trained export would.
-``onnx`` (train extra) is imported lazily.
+must not depend on binary fixtures. The graphs are built from the one layer table of
+:mod:`models.architectures` (parameter counts are asserted) and carry the preprocessing contract
+in their metadata like a trained export would. ``onnx`` (train extra) is imported lazily.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PAPER_CONTRACT, PreprocessContract
+from models.architectures import ARCHITECTURES, Architecture
 
 OPSET = 17
 
 
-@dataclass(frozen=True)
-class Conv:
-    filters: int
-    kernel: int
-    stride: int = 1
-
-
-@dataclass(frozen=True)
-class Arch:
-    """A CNN of the paper's family: valid-padded ReLU convolutions, flatten, ReLU dense layers, linear output."""
-
-    name: str
-    height: int
-    width: int
-    convs: tuple[Conv, ...]
-    dense: tuple[int, ...]  # hidden sizes; a final 1-unit linear layer is added
-    params: int  # expected parameter count (asserted)
-
-
-SHALLOW = Arch("shallow", 64, 64, (Conv(8, 11, 5), Conv(16, 5, 2), Conv(32, 3, 2)), (64, 16, 8), 14_065)
-PILOTNET = Arch("pilotnet", 66, 200, (Conv(24, 5, 2), Conv(36, 5, 2), Conv(48, 5, 2), Conv(64, 3), Conv(64, 3)),
-                (100, 50, 10), 252_219)
-ARCHS = {a.name: a for a in (SHALLOW, PILOTNET)}
+Arch = Architecture  # short name used by the benchmarks and tests
+ARCHS = ARCHITECTURES
 
 
 def _onnx() -> Any:

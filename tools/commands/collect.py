@@ -8,33 +8,41 @@ from pathlib import Path
 
 from protocol import SpeedUnit
 from tools.console import Progress
+from tools.sim.collect import CollectConfig
 
 log = logging.getLogger("rbc.collect")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--track", default="lake", help="built-in track name or track JSON path (default lake)")
-    p.add_argument("--laps", type=int, default=1, help="laps per direction (default 1)")
+    d = CollectConfig  # the defaults, defined once
+    p.add_argument("--track", default=d.track, help="built-in track name or track JSON path (default %(default)s)")
+    p.add_argument("--laps", type=int, default=d.laps, help="laps per direction (default %(default)s)")
     p.add_argument("--out", type=Path, required=True, help="output folder (driving_log.csv + IMG/)")
     p.add_argument("--both-directions", action="store_true",
                    help="drive the laps again in the reverse direction (the paper's simplistic data set)")
-    p.add_argument("--cones", type=int, default=0, help="traffic cones on the road (default 0)")
-    p.add_argument("--cone-seed", type=int, default=0, help="cone layout (default 0)")
-    p.add_argument("--cameras", type=int, choices=(1, 3), default=3, help="1 = centre only, 3 = with left/right")
-    p.add_argument("--rate-hz", type=float, default=15.0, help="rows per simulated second (default 15)")
-    p.add_argument("--seed", type=int, default=0, help="autopilot reaction times and driving line (default 0)")
-    p.add_argument("--speed-kmh", type=float, default=30.0, help="autopilot cruising speed (default 30)")
-    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=SpeedUnit.MPH.value,
+    p.add_argument("--cones", type=int, default=d.cones, help="traffic cones on the road (default %(default)s)")
+    p.add_argument("--cone-seed", type=int, default=d.cone_seed, help="cone layout (default %(default)s)")
+    p.add_argument("--cameras", type=int, choices=(1, 3), default=d.cameras,
+                   help="1 = centre only, 3 = with left/right (default %(default)s)")
+    p.add_argument("--rate-hz", type=float, default=d.rate_hz,
+                   help="rows per simulated second (default %(default)s)")
+    p.add_argument("--seed", type=int, default=d.seed,
+                   help="autopilot reaction times and driving line (default %(default)s)")
+    p.add_argument("--speed-kmh", type=float, default=d.speed_kmh,
+                   help="autopilot cruising speed (default %(default)s)")
+    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=d.speed_unit,
                    help="unit of the speed column (default mph, like Udacity; the paper's simulator: kmh)")
-    p.add_argument("--light-intensity", type=float, default=1.0)
-    p.add_argument("--light-direction", type=float, default=0.0, help="sun direction offset in degrees")
+    p.add_argument("--light-intensity", type=float, default=d.light_intensity,
+                   help="scene light intensity (default %(default)s)")
+    p.add_argument("--light-direction", type=float, default=d.light_direction_deg,
+                   help="sun direction offset in degrees (default %(default)s)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--overwrite", action="store_true", help="replace an existing log and IMG/ in --out")
     group.add_argument("--append", action="store_true", help="add rows to an existing log in --out")
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.sim.collect import CollectConfig, OutputDirError, collect
+    from tools.sim.collect import OutputDirError, collect
 
     config = CollectConfig(
         track=args.track, laps=args.laps, both_directions=args.both_directions, cones=args.cones,

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from protocol.facts import BEHAVIORS
 from tools.evaluate.experiments import SETUPS
+from tools.sim.scenario import ScenarioConfig
 
 log = logging.getLogger("rbc.demo")
 
@@ -23,8 +24,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
                    help="which bundled model, and its track (default simplistic on lake)")
     p.add_argument("--model", type=Path, default=None, help="drive with this ONNX model instead of a bundled one")
-    p.add_argument("--laps", type=int, default=1)
-    p.add_argument("--speed-limit", type=float, default=25.0, help="drive_server --speed-limit (km/h)")
+    p.add_argument("--laps", type=int, default=ScenarioConfig.laps, help="laps to drive (default %(default)s)")
+    p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
+                   help="drive_server --speed-limit in km/h (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
 
 
@@ -45,7 +47,6 @@ def run(args: argparse.Namespace) -> int:
     from drive_server.runrecords import write_json
     from tools.console import Progress
     from tools.sim.drivers import SocketDriver
-    from tools.sim.scenario import ScenarioConfig
     from tools.sim.session import run_scenario
     from tools.sim.summary import print_summary
     from tools.sim.viz import StripCollector, write_trajectory_map

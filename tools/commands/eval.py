@@ -21,18 +21,21 @@ log = logging.getLogger("rbc.eval")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", type=Path, help="ONNX model (default: the bundled model of --behavior)")
-    p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
+    d = SuiteConfig  # the defaults, defined once
+    p.add_argument("--behavior", choices=BEHAVIORS, default=d.behavior,
                    help="decides the track (lake / mountain / lake with 20 cones) and the experiments")
     p.add_argument("--server", help="drive through a running drive_server at this URL instead of in-process "
                                     "(the speed-limit experiment is then skipped: the limit is the server's)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel simulator processes")
-    p.add_argument("--seeds", type=int, default=3, help="seeds per eta experiment (mean ± std)")
-    p.add_argument("--seed", type=int, default=0, help="first seed")
-    p.add_argument("--laps", type=int, default=1, help="laps per run")
+    p.add_argument("--seeds", type=int, default=d.seeds,
+                   help="seeds per eta experiment, mean ± std (default %(default)s)")
+    p.add_argument("--seed", type=int, default=d.base_seed, help="first seed (default %(default)s)")
+    p.add_argument("--laps", type=int, default=d.laps, help="laps per run (default %(default)s)")
     p.add_argument("--experiments", nargs="+", choices=[e.key for e in EXPERIMENTS],
                    default=[e.key for e in EXPERIMENTS], help="subset of the experiments")
     p.add_argument("--track", help="override the behavior's track (name or JSON file)")
-    p.add_argument("--speed-limit", type=float, default=25.0, help="km/h for every experiment but the speed one")
+    p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
+                   help="km/h for every experiment but the speed one (default %(default)s)")
     p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "

@@ -6,8 +6,10 @@ import argparse
 import logging
 from pathlib import Path
 
+from drive_server.pipeline import DriveConfig
 from protocol import SpeedUnit
 from tools.console import Progress
+from tools.sim.scenario import ScenarioConfig
 from tools.sim.summary import print_summary
 
 log = logging.getLogger("rbc.sim")
@@ -19,27 +21,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      "(e.g. http://127.0.0.1:4567); its own --speed-limit applies")
     who.add_argument("--model", type=Path, metavar="M.onnx", help="run this ONNX model in-process (no socket)")
     who.add_argument("--autopilot", action="store_true", help="let the scripted autopilot drive (reference)")
-    p.add_argument("--track", default="lake", help="built-in track name or track JSON path (default lake)")
-    p.add_argument("--laps", type=int, default=1)
-    p.add_argument("--light-intensity", type=float, default=1.0, help="scene light intensity (default 1.0)")
-    p.add_argument("--light-direction", type=float, default=0.0, help="sun direction offset, degrees")
-    p.add_argument("--cones", type=int, default=0, help="traffic cones on the road")
-    p.add_argument("--cone-seed", type=int, default=0)
+    d = ScenarioConfig  # the defaults, defined once
+    p.add_argument("--track", default=d.track, help="built-in track name or track JSON path (default %(default)s)")
+    p.add_argument("--laps", type=int, default=d.laps, help="laps to drive (default %(default)s)")
+    p.add_argument("--light-intensity", type=float, default=d.light_intensity,
+                   help="scene light intensity (default %(default)s)")
+    p.add_argument("--light-direction", type=float, default=d.light_direction_deg,
+                   help="sun direction offset, degrees (default %(default)s)")
+    p.add_argument("--cones", type=int, default=d.cones, help="traffic cones on the road (default %(default)s)")
+    p.add_argument("--cone-seed", type=int, default=d.cone_seed, help="cone layout (default %(default)s)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--spawn-s", type=float, default=None, metavar="M", help="spawn this many metres along")
     where.add_argument("--spawn-frac", type=float, default=None, metavar="F", help="spawn at this fraction of a lap")
-    p.add_argument("--yaw-offset", type=float, default=0.0, metavar="DEG", help="spawn heading offset (+ = left)")
+    p.add_argument("--yaw-offset", type=float, default=d.yaw_offset_deg, metavar="DEG",
+                   help="spawn heading offset (+ = left; default %(default)s)")
     p.add_argument("--reverse", action="store_true", help="spawn facing the other way and drive the lap reversed")
-    p.add_argument("--speed-limit", type=float, default=25.0, help="v_l of Eq. 14 in km/h for --model (default 25)")
-    p.add_argument("--steer-limit", type=float, default=25.0, help="delta of Eq. 14 in degrees for --model")
-    p.add_argument("--tau", type=float, default=1.0, help="tau of Eq. 14 for --model")
+    law = DriveConfig
+    p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
+                   help="v_l of Eq. 14 in km/h for --model (default %(default)s)")
+    p.add_argument("--steer-limit", type=float, default=law.steer_limit_deg,
+                   help="delta of Eq. 14 in degrees for --model (default %(default)s)")
+    p.add_argument("--tau", type=float, default=law.tau, help="tau of Eq. 14 for --model (default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
-    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=SpeedUnit.MPH.value,
+    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=d.speed_unit,
                    help="telemetry speed unit (default mph like the stock simulator)")
     p.add_argument("--realtime", action="store_true",
                    help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
-    p.add_argument("--control-hz", type=float, default=15.0, help="lock-step commands per simulated second")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--control-hz", type=float, default=d.control_hz,
+                   help="lock-step commands per simulated second (default %(default)s)")
+    p.add_argument("--seed", type=int, default=d.seed, help="camera jitter and spawn seed (default %(default)s)")
     p.add_argument("--max-lap-time", type=float, default=None, metavar="S", help="give up a lap after S sim seconds")
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the full result as JSON")
     p.add_argument("--map", type=Path, default=None, metavar="PNG", help="top-down trajectory map")
@@ -75,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         speed_unit=args.speed_unit)
     if args.server:
         note = "speed limit: the drive server's own (--speed-limit applies to --model only)"
-        if args.speed_limit != 25.0:
+        if args.speed_limit != ScenarioConfig.speed_limit_kmh:
             log.warning("--speed-limit %g is ignored with --server: the drive server applies its own",
                         args.speed_limit)
     else:

@@ -18,6 +18,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.facts import MAX_STEERING_DEG
+
 log = logging.getLogger(__name__)
 
 
@@ -28,7 +30,7 @@ class DriverSpec:
     model: str | None = None
     server: str | None = None
     threads: int = 1
-    steer_limit_deg: float = 25.0
+    steer_limit_deg: float = MAX_STEERING_DEG
     tau: float = 1.0
 
     def __post_init__(self) -> None:

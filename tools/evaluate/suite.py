@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from protocol.facts import DEPLOY_SPEED_KMH
 from tools.evaluate.experiments import EXPERIMENTS, SETUPS, Experiment, is_autonomous
 from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
@@ -27,7 +28,7 @@ class SuiteConfig:
     seeds: int = 3
     base_seed: int = 0
     laps: int = 1
-    speed_limit_kmh: float = 25.0
+    speed_limit_kmh: float = DEPLOY_SPEED_KMH
     experiments: tuple[str, ...] = tuple(e.key for e in EXPERIMENTS)
     track: str | None = None  # override the behavior's track (e.g. a short test track)
     map_dir: str | None = None

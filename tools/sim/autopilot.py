@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from protocol import SteerCommand
+from protocol.facts import COLLECT_SPEED_KMH
 from tools.sim.rules import TrackFollower, angle_diff
 from tools.sim.track import Track
 from tools.sim.vehicle import VehicleParams, VehicleState, kmh_to_mps
@@ -26,7 +27,7 @@ from tools.sim.vehicle import VehicleParams, VehicleState, kmh_to_mps
 
 @dataclass(frozen=True)
 class AutopilotParams:
-    speed_kmh: float = 30.0  # the paper collected data at 30 km/h
+    speed_kmh: float = COLLECT_SPEED_KMH  # the paper collected data at 30 km/h
     lookahead_s: float = 0.9  # pure-pursuit look-ahead, seconds of travel ...
     lookahead_min_m: float = 6.0  # ... but at least this far
     max_lat_accel: float = 2.5  # m/s^2 in curves and swerves

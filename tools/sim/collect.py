@@ -23,7 +23,7 @@ from pathlib import Path
 
 from protocol import SpeedUnit
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name, last_row_stamp
-from protocol.facts import CAMERAS
+from protocol.facts import CAMERAS, COLLECT_SPEED_KMH
 from protocol.jpeg import encode_jpeg
 from protocol.units import from_kmh
 from tools.sim.autopilot import Autopilot, AutopilotParams
@@ -50,7 +50,7 @@ class CollectConfig:
     cameras: int = 3  # 1 (centre only) or 3
     rate_hz: float = 15.0  # rows per simulated second (the paper's code: every 0.0667 s)
     seed: int = 0
-    speed_kmh: float = 30.0  # the paper's data collection speed
+    speed_kmh: float = COLLECT_SPEED_KMH  # the paper's data collection speed
     speed_unit: str = SpeedUnit.MPH.value
     light_intensity: float = 1.0
     light_direction_deg: float = 0.0

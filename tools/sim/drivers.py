@@ -24,6 +24,7 @@ from typing import Protocol
 import numpy as np
 
 from protocol import SpeedUnit, SteerCommand, Telemetry, encode_steer, parse_steer, parse_telemetry
+from protocol.facts import COLLECT_SPEED_KMH, DEPLOY_SPEED_KMH, MAX_STEERING_DEG
 from tools.sim.track import Track
 from tools.sim.vehicle import VehicleParams, VehicleState
 
@@ -118,7 +119,8 @@ class OnnxDriver(LocalDriver):
     """An ONNX steering model in-process: the drive server's own pipeline (decode, preprocess, infer,
     Eq. 14) without the socket."""
 
-    def __init__(self, model_path: str | Path, speed_limit_kmh: float = 25.0, steer_limit_deg: float = 25.0,
+    def __init__(self, model_path: str | Path, speed_limit_kmh: float = DEPLOY_SPEED_KMH,
+                 steer_limit_deg: float = MAX_STEERING_DEG,
                  tau: float = 1.0, speed_unit: SpeedUnit | str = SpeedUnit.MPH, threads: int = 1) -> None:
         from drive_server.model import InferenceConfig, SteeringModel
         from drive_server.pipeline import DriveConfig, DrivePipeline
@@ -141,7 +143,7 @@ class AutopilotDriver(LocalDriver):
 
     name = "autopilot"
 
-    def __init__(self, speed_kmh: float = 30.0, seed: int | None = None) -> None:
+    def __init__(self, speed_kmh: float = COLLECT_SPEED_KMH, seed: int | None = None) -> None:
         super().__init__()
         self.speed_kmh, self.seed = speed_kmh, seed
         self.autopilot = None

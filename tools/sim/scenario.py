@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from protocol import SpeedUnit, SteerCommand
+from protocol.facts import DEPLOY_SPEED_KMH
 from tools.sim.rules import (
     LapResult,
     Rules,
@@ -29,7 +30,7 @@ class ScenarioConfig:
     spawn_s: float | None = None  # metres along the track; None = the track's start
     yaw_offset_deg: float = 0.0  # + = turned left (counter-clockwise)
     reverse: bool = False  # spawn facing the other way; the lap is then driven in reverse
-    speed_limit_kmh: float = 25.0  # for in-process drivers built from this config (a server has its own)
+    speed_limit_kmh: float = DEPLOY_SPEED_KMH  # for in-process drivers built from this config (a server has its own)
     realtime: bool = False
     sim_fps: int = 60
     control_hz: float = 15.0  # lock-step only: one command per 1/control_hz s (the paper logs at 15 Hz)

@@ -1,0 +1,37 @@
+"""The paper's networks as a layer table: the ONE definition that PyTorch training and the torch-free
+ONNX builder of random-weight test/benchmark models both build from (no torch, no numpy here)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Conv:
+    filters: int
+    kernel: int
+    stride: int = 1
+
+
+@dataclass(frozen=True)
+class Architecture:
+    """A CNN of the paper's family: valid-padded ReLU convolutions, flatten, ReLU dense layers (each
+    followed by dropout when ``dropout`` > 0, training only), and a final 1-unit linear layer."""
+
+    name: str
+    height: int  # the input size the parameter count refers to
+    width: int
+    convs: tuple[Conv, ...]
+    dense: tuple[int, ...]  # hidden sizes; the 1-unit output layer is implied
+    params: int  # parameter count at height x width (asserted by both builders)
+    dropout: float = 0.0
+
+
+#: Paper Fig. 11 (verified from the authors' notebook): 14,065 parameters at 64x64.
+SHALLOW = Architecture("shallow", 64, 64, (Conv(8, 11, 5), Conv(16, 5, 2), Conv(32, 3, 2)), (64, 16, 8), 14_065,
+                       dropout=0.25)
+#: NVIDIA's PilotNet (Bojarski et al. 2016): 252,219 parameters at 66x200.
+PILOTNET = Architecture("pilotnet", 66, 200,
+                        (Conv(24, 5, 2), Conv(36, 5, 2), Conv(48, 5, 2), Conv(64, 3), Conv(64, 3)), (100, 50, 10),
+                        252_219)
+ARCHITECTURES = {a.name: a for a in (SHALLOW, PILOTNET)}
