@@ -7,12 +7,10 @@ from enum import StrEnum
 
 from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
 from models.augment import AugmentSpec
+from protocol.facts import BEHAVIORS
 
-
-class Behavior(StrEnum):
-    SIMPLISTIC = "simplistic"
-    RIGOROUS = "rigorous"
-    COLLISION = "collision"
+#: The paper's behaviors; the names are protocol.facts.BEHAVIORS (defined there once).
+Behavior = StrEnum("Behavior", [(name.upper(), name) for name in BEHAVIORS])
 
 
 class Approach(StrEnum):
@@ -32,7 +30,7 @@ class BehaviorSpec:
     augment: AugmentSpec  # Table 5
 
 
-BEHAVIORS: dict[Behavior, BehaviorSpec] = {
+BEHAVIOR_SPECS: dict[Behavior, BehaviorSpec] = {
     Behavior.SIMPLISTIC: BehaviorSpec(0.7, 5, AugmentSpec(perspective=0.5, flip=0.5)),
     Behavior.RIGOROUS: BehaviorSpec(0.8, 10, AugmentSpec(perspective=0.5, flip=0.0)),  # flipping changes lanes
     Behavior.COLLISION: BehaviorSpec(0.8, 5, AugmentSpec(perspective=0.0, flip=0.5)),  # one camera
@@ -60,7 +58,7 @@ class Pipeline:
 
 def pipeline_for(behavior: Behavior | str, arch: Arch | str, approach: Approach | str) -> Pipeline:
     """The paper's pipeline ("ours"; 200x66 for PilotNet) or NVIDIA's, for one behavior."""
-    spec = BEHAVIORS[Behavior(behavior)]
+    spec = BEHAVIOR_SPECS[Behavior(behavior)]
     arch, approach = Arch(arch), Approach(approach)
     if approach is Approach.NVIDIA:
         augment = NVIDIA_AUGMENT if spec.augment.flip else replace(NVIDIA_AUGMENT, flip=0.0)

@@ -13,7 +13,7 @@ from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT
 from drive_server.preprocess import frame_to_network_image
 from models import augment, geometry
 from models.augment import CAMERAS, CENTER, LEFT, RIGHT, AugmentSpec, augment_reference, draw_params
-from models.behavior import BEHAVIORS, NVIDIA_AUGMENT, Behavior
+from models.behavior import BEHAVIOR_SPECS, NVIDIA_AUGMENT, Behavior
 from models.fastaug import FastAugmenter, augment_batch
 from models.framecache import FrameCache, build_cache, load_frame
 from protocol.datalog import read_log
@@ -72,7 +72,7 @@ def test_flip_is_for_centre_frames_only() -> None:
 
 @pytest.mark.parametrize("behavior", list(Behavior))
 def test_table_5_probabilities(behavior: Behavior) -> None:
-    spec = BEHAVIORS[behavior].augment
+    spec = BEHAVIOR_SPECS[behavior].augment
     n = 40000
     p = draw_params(np.zeros(n), np.ones(n, bool), spec, np.random.default_rng(1))
     expected = {"simplistic": (0.5, 0.5), "rigorous": (0.5, 0.0), "collision": (0.0, 0.5)}[behavior.value]
@@ -90,13 +90,13 @@ def test_table_5_probabilities(behavior: Behavior) -> None:
 
 
 def test_one_camera_samples_never_use_side_frames() -> None:
-    p = draw_params(np.zeros(500), np.zeros(500, bool), BEHAVIORS[Behavior.SIMPLISTIC].augment,
+    p = draw_params(np.zeros(500), np.zeros(500, bool), BEHAVIOR_SPECS[Behavior.SIMPLISTIC].augment,
                     np.random.default_rng(0))
     assert (p.camera == CENTER).all()
 
 
 def test_draws_are_seeded() -> None:
-    spec = BEHAVIORS[Behavior.SIMPLISTIC].augment
+    spec = BEHAVIOR_SPECS[Behavior.SIMPLISTIC].augment
     a = draw_params(np.zeros(64), np.ones(64, bool), spec, np.random.default_rng(5))
     b = draw_params(np.zeros(64), np.ones(64, bool), spec, np.random.default_rng(5))
     c = draw_params(np.zeros(64), np.ones(64, bool), spec, np.random.default_rng(6))
@@ -234,7 +234,7 @@ def test_nvidia_yuv_brightness_moves_luma_only_and_shift_corrects_label() -> Non
 def test_batches_are_float_nchw_in_the_contract_scale(real) -> None:
     samples, cache = real
     steering = np.array([s.steering for s in samples], np.float32)
-    aug = FastAugmenter(cache, BEHAVIORS[Behavior.SIMPLISTIC].augment)
+    aug = FastAugmenter(cache, BEHAVIOR_SPECS[Behavior.SIMPLISTIC].augment)
     idx = np.arange(len(samples))
     x, y = augment_batch(aug, idx, steering, np.ones(len(samples), bool), np.random.default_rng(0))
     assert x.shape == (36, 3, 64, 64) and x.dtype == np.float32 and x.flags.c_contiguous

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from models.balance import balanced_pass, index_batches, zero_steer_drop_count
-from models.behavior import BEHAVIORS, Behavior
+from models.behavior import BEHAVIOR_SPECS, Behavior
 from models.split import split_indices
 
 
@@ -19,7 +19,7 @@ def test_drop_count_is_floor_of_d_lambda(d: int, lam: float) -> None:
 
 
 def test_paper_deletion_rates() -> None:
-    assert [BEHAVIORS[b].deletion_rate for b in Behavior] == [0.7, 0.8, 0.8]
+    assert [BEHAVIOR_SPECS[b].deletion_rate for b in Behavior] == [0.7, 0.8, 0.8]
 
 
 @pytest.mark.parametrize("lam", [0.7, 0.8])

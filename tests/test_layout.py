@@ -61,7 +61,8 @@ def test_protocol_imports_nothing_of_ours():
 
 def test_the_log_format_and_facts_are_stdlib_only():
     for name in ("protocol.datalog", "protocol.datalog_writer", "protocol.facts", "protocol.errors"):
-        outside = [i for i in _imports(MODULES[name]) if i.split(".")[0] not in STDLIB and not i.startswith("protocol.")]
+        imports = _imports(MODULES[name])
+        outside = [i for i in imports if i.split(".")[0] not in STDLIB and not i.startswith("protocol.")]
         assert outside == [], name
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from protocol.facts import JPEG_QUALITY
+from protocol.facts import DEPLOY_SPEED_KMH, JPEG_QUALITY
 from tools.sim.cones import place_cones
 from tools.sim.render import Renderer
 from tools.sim.track import Track
@@ -132,7 +132,7 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
             os.sched_setaffinity(0, {min(before)})
         try:
             with ServerProcess(model, ["--log-every", "0"]) as server, SocketDriver(server.url) as driver:
-                result = run_scenario(ScenarioConfig(track="lake", speed_limit_kmh=25.0), driver)
+                result = run_scenario(ScenarioConfig(track="lake", speed_limit_kmh=DEPLOY_SPEED_KMH), driver)
         finally:
             if can_pin:
                 os.sched_setaffinity(0, before)

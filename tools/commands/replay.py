@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from protocol.facts import MAX_STEERING_DEG
 from tools.wire.frames import log_frames
 from tools.wire.unity_client import ConnectionClosed, UnityWireClient
 
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
                     manual += 1
                     reply = "manual"
                 else:
-                    reply = f"steer {command.steering:+.4f} ({command.steering * 25:+6.2f} deg) " \
+                    reply = f"steer {command.steering:+.4f} ({command.steering * MAX_STEERING_DEG:+6.2f} deg) " \
                             f"throttle {command.throttle:+.4f}"
                 if not args.quiet:
                     sent = "null (manual)" if is_null else \

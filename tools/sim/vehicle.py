@@ -39,7 +39,7 @@ class VehicleParams:
     max_steer_deg: float = MAX_STEERING_DEG
     # Unity's keyboard axis ramps at 3 units/s (sensitivity 3): 3 x 25 deg = 75 deg/s. The wheel
     # follows any command (keyboard or network) no faster than that.
-    steer_rate_deg_s: float = 75.0
+    steer_rate_deg_s: float = 3.0 * MAX_STEERING_DEG
     max_accel_mps2: float = 3.5  # full throttle from standstill
     max_brake_mps2: float = 7.0  # full brake (throttle -1)
     rolling_mps2: float = 0.15  # rolling resistance when coasting

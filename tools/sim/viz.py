@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from protocol.facts import MAX_STEERING_DEG
 from tools.sim.scenario import FrameEvent, RunResult
 from tools.sim.track import Track
 from tools.sim.vehicle import mps_to_kmh
@@ -222,7 +223,7 @@ def annotate(event: FrameEvent, speed_unit: str = "km/h") -> np.ndarray:
     h, w = bgr.shape[:2]
     cx, y0 = w // 2, h - 18
     cv2.rectangle(bgr, (cx - 150, y0), (cx + 150, y0 + 10), (0, 0, 0), -1)
-    end = cx + int(round(150 * max(-1.0, min(1.0, steer_deg / 25.0))))
+    end = cx + int(round(150 * max(-1.0, min(1.0, steer_deg / MAX_STEERING_DEG))))
     # + steering = right (Unity's convention): the bar grows to the right
     cv2.rectangle(bgr, (min(cx, end), y0 + 2), (max(cx, end), y0 + 8), (0, 220, 255), -1)
     cv2.line(bgr, (cx, y0 - 3), (cx, y0 + 13), (255, 255, 255), 1)
