@@ -134,3 +134,38 @@ def test_several_logs_combine(tmp_path: Path) -> None:
     assert [r.used for r in data.reports] == [36, 1]
     with pytest.raises(DataLogError):
         read_logs([])
+
+
+def test_writer_rows_read_back_with_the_reader(tmp_path: Path) -> None:
+    """One column layout: what the writer writes, the reader reads (numbers as C# prints them)."""
+    import datetime as dt
+
+    from protocol.datalog_writer import (
+        IMAGE_DIR,
+        LOG_NAME,
+        LogWriter,
+        format_number,
+        frame_name,
+        last_row_stamp,
+        parse_frame_stamp,
+    )
+
+    when = dt.datetime(2020, 5, 9, 22, 17, 4, 872000)
+    (tmp_path / IMAGE_DIR).mkdir()
+    jpeg = FRAMES[0].read_bytes()
+    with LogWriter(tmp_path / LOG_NAME) as writer:
+        for k in range(3):
+            t = when + dt.timedelta(seconds=k / 15)
+            paths = [tmp_path / IMAGE_DIR / frame_name(cam, t) for cam in ("center", "left", "right")]
+            for path in paths:
+                path.write_bytes(jpeg)
+            writer.write([str(p) for p in paths], -0.2095149 * k, 0.5, 7.843922e-05, 30.0 / 1.609344)
+    text = (tmp_path / LOG_NAME).read_text()
+    assert ", " in text and "E-05" in text and text.count("\n") == 3
+    samples, report = read_log(tmp_path)
+    assert report.used == 3 and not report.skipped
+    assert [round(s.steering, 6) for s in samples] == [0.0, -0.209515, -0.41903]
+    assert samples[0].has_sides and samples[2].brake == pytest.approx(7.843922e-05)
+    assert last_row_stamp(tmp_path / LOG_NAME) == when + dt.timedelta(milliseconds=1000 * 2 // 15)
+    assert parse_frame_stamp(frame_name("left", when)) == when
+    assert format_number(0.0) == "0" and format_number(-0.5) == "-0.5"

@@ -50,3 +50,17 @@ def test_contract_input_takes_nhwc_and_matches_nchw() -> None:
         b = net(x.permute(0, 3, 1, 2).contiguous())
         c = ContractInput(net, "nchw")(x.permute(0, 3, 1, 2))
     assert torch.equal(a, b) and torch.equal(b, c)
+
+
+@pytest.mark.parametrize("name", ["shallow", "pilotnet"])
+def test_torch_and_onnx_builders_make_the_same_layers_from_the_one_table(name):
+    """The random-weight ONNX networks of the tests and benchmarks are the trained architectures."""
+    pytest.importorskip("onnx")
+    from models.architectures import ARCHITECTURES
+    from tools.bench.onnx_builders import build_model as build_onnx
+
+    spec = ARCHITECTURES[name]
+    torch_shapes = [tuple(p.shape) for p in build_model(name, spec.height, spec.width).parameters()]
+    onnx_shapes = [tuple(t.dims) for t in build_onnx(spec).graph.initializer]
+    assert torch_shapes == onnx_shapes
+    assert sum(int(torch.tensor(s).prod()) for s in torch_shapes) == spec.params

@@ -167,7 +167,7 @@ class AutopilotDriver(LocalDriver):
 
 
 class SocketDriver:
-    """A drive server over the Unity wire (:class:`tools.unity_client.UnityWireClient`), one connection per run.
+    """A drive server over the Unity wire (:class:`tools.wire.unity_client.UnityWireClient`), one connection per run.
 
     Each run opens a fresh connection, as if the simulator were started anew, so a server's per-client
     state never leaks between scenarios.
