@@ -72,7 +72,9 @@ def test_rbc_replay(tmp_path, capsys):
 
 
 def test_rbc_replay_unreachable_server(capsys):
-    assert rbc(["replay", "--server", "http://127.0.0.1:9", "--log", str(SAMPLE_LOG), "--frames", "1"]) == 1
+    assert rbc(["replay", "--server", "http://127.0.0.1:9", "--log", str(SAMPLE_LOG), "--frames", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rbc replay: error: replay to http://127.0.0.1:9 failed")
 
 
 def test_rbc_bench_without_onnx_says_what_to_do(monkeypatch, caplog):

@@ -60,8 +60,9 @@ def test_resume_reuses_finished_runs_and_refuses_another_model(tmp_path, shallow
     assert len(rerun) == 4 and len({record_key(r) for r in rerun}) == 4
     assert "3 reused from the journal" in second.stdout
 
-    other = tmp_path / "other.onnx"
-    other.write_bytes(shallow_onnx.read_bytes() + b"\0")  # another file: another hash
+    from tools.bench.onnx_builders import save_model
+
+    other = save_model("shallow", tmp_path / "other.onnx", seed=1)  # another model: another hash
     refused = _eval(other, track, out, "--resume")
     assert refused.returncode != 0 and "different model_sha256" in refused.stderr
 

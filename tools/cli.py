@@ -10,15 +10,19 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import logging
 import sys
 from dataclasses import dataclass
+from importlib import metadata
 from types import ModuleType
 
+from tools.errors import is_user_error, one_line, remove_new_empty_outputs, snapshot
+
 #: Options of ``rbc`` itself, allowed before the subcommand.
-GLOBAL_FLAGS = ("-v", "--verbose", "-h", "--help")
-#: Packages of the optional extras, by extra: a missing one is reported with its install line.
-EXTRA_PACKAGES = {"torch": "train", "onnx": "train", "tqdm": "train", "matplotlib": "plots"}
+GLOBAL_FLAGS = ("-v", "--verbose", "-h", "--help", "--version")
+#: The packages of each optional extra (as in pyproject.toml): checked before a command that needs them runs.
+EXTRAS = {"train": ("torch", "onnx", "matplotlib", "tqdm"), "plots": ("matplotlib",)}
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,8 @@ def top_parser() -> argparse.ArgumentParser:
         prog="rbc",
         description="Robust behavioral cloning: collect, train, deploy and evaluate driving models.",
     )
-    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging, and tracebacks for errors")
+    parser.add_argument("--version", action="store_true", help="print the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for cmd in SUBCOMMANDS:
         sub.add_parser(cmd.name, help=cmd.help, description=cmd.help, add_help=False)
@@ -80,9 +85,9 @@ def load(cmd: Subcommand) -> ModuleType:
         return importlib.import_module(cmd.module)
     except ModuleNotFoundError as exc:
         root = (exc.name or "").split(".")[0]
-        if root in EXTRA_PACKAGES:
-            extra = cmd.extra or EXTRA_PACKAGES[root]
-            sys.exit(f'rbc {cmd.name}: needs the package {root!r}; install it with: pip install -e ".[{extra}]"')
+        extra = cmd.extra or next((e for e, names in EXTRAS.items() if root in names), "")
+        if extra:
+            sys.exit(f'rbc {cmd.name}: error: needs the package {root!r} (hint: pip install -e ".[{extra}]")')
         raise
 
 
@@ -92,9 +97,16 @@ def subcommand_parser(cmd: Subcommand, module: ModuleType) -> argparse.ArgumentP
     return parser
 
 
+#: Argument names of output paths: created by a command, removed again if it fails leaving them empty.
+OUTPUT_ARGS = ("out", "json", "map", "strip", "video")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     cmd, index = find_subcommand(argv)
+    if any(a == "--version" for a in argv[: index if index >= 0 else len(argv)]):
+        print(f"rbc {package_version()}")
+        return 0
     if cmd is None:
         parser = top_parser()
         if index < 0:
@@ -107,16 +119,43 @@ def main(argv: list[str] | None = None) -> int:
     if any(a in ("-h", "--help") for a in argv[:index]):
         top_parser().print_help()
         return 0
+    missing = missing_packages(cmd)
+    if missing:
+        print(f"rbc {cmd.name}: error: needs the package(s) {', '.join(missing)} "
+              f'(hint: pip install -e ".[{cmd.extra}]")', file=sys.stderr)
+        return 2
     module = load(cmd)
     args = subcommand_parser(cmd, module).parse_args(argv[index + 1:])
     args.command, args.verbose = cmd.name, verbose or getattr(args, "verbose", False)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+    created = snapshot(getattr(args, name, None) for name in OUTPUT_ARGS)
     try:
         return int(module.run(args) or 0)
     except KeyboardInterrupt:
         logging.getLogger("rbc").warning("interrupted")
+        remove_new_empty_outputs(created)
         return 130
+    except Exception as exc:  # the error boundary: see tools.errors
+        remove_new_empty_outputs(created)
+        if args.verbose or not is_user_error(exc):
+            raise
+        print(one_line(cmd.name, exc), file=sys.stderr)
+        return 2
+
+
+def package_version() -> str:
+    try:
+        return metadata.version("robust-behavioral-cloning")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def missing_packages(cmd: Subcommand) -> list[str]:
+    """The packages of ``cmd``'s extra that are not installed (checked before anything runs)."""
+    if not cmd.extra:
+        return []
+    return [name for name in EXTRAS[cmd.extra] if importlib.util.find_spec(name) is None]
 
 
 if __name__ == "__main__":

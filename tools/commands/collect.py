@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.sim.collect import OutputDirError, collect
+    from tools.sim.collect import collect
 
     config = CollectConfig(
         track=args.track, laps=args.laps, both_directions=args.both_directions, cones=args.cones,
@@ -52,9 +52,6 @@ def run(args: argparse.Namespace) -> int:
     progress = Progress(f"collect {args.track}", log)
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)
-    except OutputDirError as exc:
-        log.error("%s", exc)
-        return 2
     finally:
         progress.close()
     rate = result.rows / result.wall_time_s if result.wall_time_s else 0.0

@@ -8,6 +8,7 @@ import logging
 from pathlib import Path
 
 from drive_server.runrecords import write_text
+from tools.errors import CommandError
 from tools.evaluate.compare import build_table, measure_latency, training_summary
 
 log = logging.getLogger("rbc.compare")
@@ -46,15 +47,13 @@ def _table9(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     missing = [d for d in args.evals if not (d / "results.json").is_file()]
     if missing:
-        log.error("%s has no results.json: run rbc eval --out %s first", missing[0], missing[0])
-        return 2
+        raise CommandError(f"{missing[0]} has no results.json", f"run rbc eval --out {missing[0]} first")
     if args.layout == "table9":
         return _table9(args)
     labels = args.labels or [d.name for d in args.evals]
     runs = args.runs or [None] * len(args.evals)
     if len(labels) != len(args.evals) or len(runs) != len(args.evals):
-        log.error("give as many --label and --train-run as --eval (or none)")
-        return 2
+        raise CommandError("give as many --label and --train-run as --eval (or none)")
     columns = []
     for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
         results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))

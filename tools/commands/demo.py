@@ -13,6 +13,7 @@ import logging
 from pathlib import Path
 
 from protocol.facts import BEHAVIORS
+from tools.errors import CommandError
 from tools.evaluate.experiments import SETUPS
 from tools.sim.scenario import ScenarioConfig
 
@@ -54,8 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     model = args.model or bundled_model_path(args.behavior)
     if not model.is_file():
-        log.error("model not found: %s", model)
-        return 2
+        raise CommandError(f"model not found: {model}", "pass --model PATH to an .onnx file")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     stats_path = out / "server_stats.json"
@@ -68,8 +68,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         url = server.start()
     except ServerStartError as exc:
-        log.error("%s", exc)
-        return 2
+        raise CommandError(str(exc)) from exc
     print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track}")
     progress = Progress(f"demo {config.track}")
     try:

@@ -9,12 +9,15 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
+from drive_server.model import SteeringModel
 from drive_server.runrecords import code_version, file_sha256, write_json, write_text
-from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS
+from tools.errors import CommandError
+from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS, SETUPS
 from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, Runner, spec_dict
 from tools.evaluate.suite import SuiteConfig, run_suite
+from tools.sim.track_file import get_track
 
 log = logging.getLogger("rbc.eval")
 
@@ -53,11 +56,15 @@ def _model_path(args: argparse.Namespace) -> Path:
 def run(args: argparse.Namespace) -> int:
     model = _model_path(args)
     if not model.is_file():
-        raise SystemExit(f"rbc eval: model file not found: {model}")
+        raise CommandError(f"model file not found: {model}", "pass --model PATH to an .onnx file")
     experiments = tuple(args.experiments)
     if args.server and "speed_limit" in experiments:
         log.warning("--server: skipping the speed-limit experiment (the speed limit belongs to the server)")
         experiments = tuple(e for e in experiments if e != "speed_limit")
+    # bad input is an error before any output exists: the track, and the model unless a server drives
+    get_track(args.track or SETUPS[args.behavior].track)
+    if not args.server:
+        SteeringModel(model)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     spec = DriverSpec(model=None if args.server else str(model), server=args.server)

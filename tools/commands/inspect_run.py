@@ -10,6 +10,7 @@ from pathlib import Path
 
 from models import runfiles
 from models.inspection import LAP_FRAMES, plot_activations, plot_histograms, plot_loss, plot_predictions
+from tools.errors import CommandError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,6 +33,9 @@ def run(args: argparse.Namespace) -> int:
     from models.trainingdata import prepare_data
 
     run_dir: Path = args.run_dir
+    if not (run_dir / runfiles.CONFIG).is_file():
+        raise CommandError(f"{run_dir}: not a training run folder (no {runfiles.CONFIG})",
+                           "give the --out folder of an rbc train run")
     record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
     config = TrainConfig.from_dict(record["config"])
     pipeline = pipeline_for(config.behavior, config.arch, config.approach)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from protocol.facts import MAX_STEERING_DEG
+from tools.errors import CommandError
 from tools.wire.frames import log_frames
 from tools.wire.unity_client import ConnectionClosed, UnityWireClient
 
@@ -33,11 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        frames = log_frames(args.log, args.camera)
-    except (OSError, ValueError) as exc:
-        log.error("cannot read the driving log: %s", exc)
-        return 2
+    frames = log_frames(args.log, args.camera)
     n = len(frames) if args.frames is None else args.frames
     decimal = "," if args.locale == "comma" else "."
     rtts: list[float] = []
@@ -60,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
                         f"speed {frame.speed:6.2f} recorded steer {frame.steering_deg:+6.2f} deg"
                     print(f"{i:5d}  {sent:45s} -> {reply:52s} {rtt * 1e3:7.3f} ms")
     except (ConnectionError, ConnectionClosed, TimeoutError, OSError) as exc:
-        log.error("replay to %s failed after %d frames: %s", args.server, len(rtts), exc)
-        return 1
+        raise CommandError(f"replay to {args.server} failed after {len(rtts)} frames: {exc}",
+                           "is drive_server running at that address?") from exc
     r = np.asarray(rtts) * 1e3
     print(f"{len(rtts)} frames ({manual} manual) to {args.server}: round trip p50 {np.percentile(r, 50):.3f} "
           f"p99 {np.percentile(r, 99):.3f} max {r.max():.3f} ms")

@@ -9,6 +9,7 @@ from pathlib import Path
 from drive_server.pipeline import DriveConfig
 from protocol import SpeedUnit
 from tools.console import Progress
+from tools.errors import CommandError
 from tools.sim.scenario import ScenarioConfig
 from tools.sim.summary import print_summary
 
@@ -109,19 +110,13 @@ def run(args: argparse.Namespace) -> int:
         for hook in hooks:
             hook(event)
 
-    from drive_server.model import ModelError
-
-    try:
-        driver = _driver(args)
-    except ModelError as exc:
-        log.error("%s", exc)
-        return 2
+    driver = _driver(args)
     progress = Progress(f"sim {args.track}")
     try:
         result = run_scenario(config, driver, progress=progress, on_frame=on_frame if hooks else None)
     except (OSError, TimeoutError) as exc:  # refused, closed or silent drive server
-        log.error("driving with %s failed: %s", driver.name, exc)
-        return 2
+        raise CommandError(f"driving with {driver.name} failed: {exc}",
+                           "is drive_server running at that address?" if args.server else "") from exc
     finally:
         progress.close()
         driver.close()

@@ -6,6 +6,7 @@ import argparse
 
 from models.behavior import Approach, Arch, Behavior
 from models.train_config import TrainConfig
+from tools.errors import CommandError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,20 +35,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from models.train import RunDirError, train
+    from models.train import train
 
     if not args.data and not args.resume:
-        print("rbc train: give at least one --data DIR")
-        return 2
+        raise CommandError("no training data", "give at least one --data DIR (a folder rbc collect wrote)")
     config = TrainConfig(data=args.data, out=args.out, behavior=args.behavior, arch=args.arch,
                          approach=args.approach, epochs=args.epochs, aug_loops=args.aug_loops,
                          batch_size=args.batch_size, seed=args.seed, max_steps_per_epoch=args.max_steps_per_epoch,
                          threads=args.threads, progress=not args.no_progress)
-    try:
-        result = train(config, resume=args.resume)
-    except RunDirError as exc:
-        print(f"rbc train: {exc}")
-        return 2
+    result = train(config, resume=args.resume)
     for row in result.history:
         print(f"epoch {row['epoch']}: train MSE {row['train_loss']:.5f}  val MSE {row['val_loss']:.5f}  "
               f"{row['seconds']:.0f} s")

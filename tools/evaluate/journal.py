@@ -7,6 +7,7 @@ import logging
 from pathlib import Path
 
 from drive_server.runrecords import write_json, write_text
+from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, read_journal, spec_dict
 
 log = logging.getLogger(__name__)
@@ -31,8 +32,8 @@ def prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> d
             earlier = json.loads(identity_file.read_text(encoding="utf-8"))
             if earlier != identity:
                 diff = sorted(k for k in identity if earlier.get(k) != identity[k])
-                raise SystemExit(f"rbc eval --resume: the journal in {out} was written for a different "
-                                 f"{', '.join(diff)}; use a new --out, or drop --resume to start afresh")
+                raise CommandError(f"--resume: the journal in {out} was written for a different {', '.join(diff)}",
+                                   "use a new --out, or drop --resume to start afresh")
         reuse = read_journal(journal)
         # rewrite it with the complete records only, so new runs never append to a line cut in half
         write_text(journal, "".join(json.dumps(r) + "\n" for r in reuse.values()))

@@ -27,9 +27,11 @@ from protocol.facts import CAMERAS, COLLECT_SPEED_KMH
 from protocol.jpeg import encode_jpeg
 from protocol.units import from_kmh
 from tools.sim.autopilot import Autopilot, AutopilotParams
+from tools.sim.cones import place_cones
 from tools.sim.rules import LapResult
 from tools.sim.scenario import ScenarioConfig
 from tools.sim.simulation import Simulation
+from tools.sim.track_file import get_track
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +108,8 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
             progress: Callable[[float, float], None] | None = None) -> CollectResult:
     """Drive ``config.laps`` laps (per direction) with the autopilot and record them to ``out_dir``."""
     out_dir = Path(out_dir).resolve()
+    track = get_track(config.track)  # a bad track or cone count is an error before any output exists
+    place_cones(track, config.cones, config.cone_seed)
     start = prepare_output(out_dir, overwrite, append)
     result = CollectResult(out_dir=out_dir, rows=0, zero_steer_rows=0)
     directions = (False, True) if config.both_directions else (False,)
