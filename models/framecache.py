@@ -55,11 +55,12 @@ class FrameCache:
 
 
 def build_cache(samples: Sequence[Sample], contract: PreprocessContract, cameras: Sequence[str] = CAMERAS,
-                workers: int = 2, progress: Callable[[int], None] | None = None,
+                workers: int = 2, progress: Callable[[int, int], None] | None = None,
                 reduce: int | None = None) -> FrameCache:
     """Decode the given cameras of every sample (side frames of one-camera samples stay black).
 
-    ``reduce`` overrides the serving rule's JPEG decode scale (tests compare against full decodes).
+    ``progress(done, total)`` is called after every chunk of samples. ``reduce`` overrides the serving
+    rule's JPEG decode scale (tests compare against full decodes).
     """
     cams = tuple(c for c in CAMERAS if c in cameras)
     n = len(samples)
@@ -86,7 +87,7 @@ def build_cache(samples: Sequence[Sample], contract: PreprocessContract, cameras
         for start in range(0, n, chunk):
             list(pool.map(work, range(start, min(n, start + chunk))))
             if progress is not None:
-                progress(min(n, start + chunk) - start)
+                progress(min(n, start + chunk), n)
     if errors:
         log.warning("%d samples with unreadable frames skipped; first: %s", len(errors), errors[0])
     return FrameCache(frames, cams, contract, valid, errors)

@@ -91,19 +91,19 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     cv2.setNumThreads(1)
     torch.manual_seed(config.seed)
 
+    model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+    state = _State()
+    checkpoint = run_dir / runfiles.CHECKPOINT
+    if resume and checkpoint.exists():  # before decoding any frame: a bad checkpoint is reported at once
+        state = _load_checkpoint(checkpoint, model, optimizer)
+        log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
     data = _prepare(config, pipeline)
     n_train, n_val = len(data.train), len(data.val)
     steps = steps_per_epoch(n_train, config.batch_size, config.aug_loops)
     if config.max_steps_per_epoch:
         steps = min(steps, config.max_steps_per_epoch)
-    model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
-    state = _State()
-    checkpoint = run_dir / runfiles.CHECKPOINT
-    if resume and checkpoint.exists():
-        state = _load_checkpoint(checkpoint, model, optimizer)
-        log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
-    else:
+    if not (resume and checkpoint.exists()):
         runrecords.write_json(run_dir / runfiles.CONFIG, _config_record(config, pipeline, data, epochs, steps))
 
     augmenter = FastAugmenter(data.cache, pipeline.augment)
@@ -210,8 +210,13 @@ def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
     from tqdm import tqdm
 
     workers = config.decode_workers or max(1, os.cpu_count() or 1)
-    with tqdm(desc="decoding frames", unit="sample", disable=not config.progress, leave=False) as bar:
-        return prepare_data(config.data, pipeline, config.seed, config.val_fraction, workers, bar.update)
+    with tqdm(desc="decoding frames", unit="sample", disable=not config.progress, leave=False, delay=0.5) as bar:
+
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        return prepare_data(config.data, pipeline, config.seed, config.val_fraction, workers, progress)
 
 
 def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool) -> TrainConfig:
@@ -259,11 +264,16 @@ def _save_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimi
 
 
 def _load_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer) -> _State:
-    payload = torch.load(path, map_location="cpu", weights_only=False)
-    model.load_state_dict(payload["model"])
-    optimizer.load_state_dict(payload["optimizer"])
-    torch.set_rng_state(payload["torch_rng"])
-    return _State(**payload["state"])
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=False)
+        model.load_state_dict(payload["model"])
+        optimizer.load_state_dict(payload["optimizer"])
+        torch.set_rng_state(payload["torch_rng"])
+        return _State(**payload["state"])
+    except Exception as exc:  # a truncated, foreign or corrupt file: whatever torch raises for it
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RunDirError(f"{path}: not a readable checkpoint of this run ({first[:120]}); delete it and "
+                          f"{runfiles.CONFIG} to train again from the start") from None
 
 
 class _StopFlag:

@@ -29,7 +29,7 @@ class PreparedData:
 
 
 def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, val_fraction: float = 0.2,
-                 workers: int = 2, progress: Callable[[int], None] | None = None) -> PreparedData:
+                 workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
     dataset = read_logs(data)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
     cache = build_cache(dataset.samples, pipeline.contract, cameras, workers=workers, progress=progress)

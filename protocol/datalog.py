@@ -125,11 +125,11 @@ def read_log(path: Path | str) -> tuple[list[Sample], LogReport]:
             except _RowError as exc:
                 report.skipped.append(SkippedRow(line_no, str(exc)))
     report.used = len(samples)
-    if report.skipped:
-        log.warning("%s", report.summary())
     if not samples:
         why = f" ({report.skipped[0].reason} at line {report.skipped[0].line})" if report.skipped else ""
         raise DataLogError(f"{log_path}: no usable samples in {report.rows} rows{why}")
+    if report.skipped:
+        log.warning("%s", report.summary())
     return samples, report
 
 

@@ -35,10 +35,8 @@ def _hint_for(exc: BaseException) -> str:
         return "the track file format is in the README, section The headless simulator"
     if name in ("ModelError", "ContractError", "ExportError"):
         return "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
-    if name == "RunDirError":
-        return "use a new --out folder, or --resume to continue the run in it"
-    if name == "OutputDirError":
-        return ""
+    if name in ("RunDirError", "OutputDirError"):
+        return ""  # their messages say what to do
     if isinstance(exc, OSError):
         if exc.errno == errno.ENOSPC:
             return "free some disk space, or write to another disk"

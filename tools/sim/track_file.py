@@ -34,6 +34,11 @@ from tools.sim.track import (
 
 log = logging.getLogger(__name__)
 
+#: Bounds checked before anything is allocated (a hostile or broken file must not take the machine down).
+MAX_CONTROL_POINTS = 2000
+MAX_COORDINATE_M = 10_000.0
+MAX_LENGTH_M = 20_000.0
+
 FORMAT_VERSION = 1
 
 
@@ -179,10 +184,15 @@ class _Reader:
 def _control_points(raw: Any, r: _Reader) -> np.ndarray:
     if not isinstance(raw, list):
         r.fail("'centerline' must be a list of [x, y] points")
+    if len(raw) > MAX_CONTROL_POINTS:  # the spline solve is O(n^2) in memory: refuse before allocating
+        r.fail(f"centerline has {len(raw)} points; at most {MAX_CONTROL_POINTS} control points are accepted "
+               "(the spline through them is resampled every 0.5 m anyway)")
     for i, p in enumerate(raw):
         if (not isinstance(p, list | tuple) or len(p) != 2
                 or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in p)):
             r.fail(f"centerline point {i} must be [x, y] with finite numbers, got {p!r}")
+        if max(abs(p[0]), abs(p[1])) > MAX_COORDINATE_M:
+            r.fail(f"centerline point {i} {p!r} is more than {MAX_COORDINATE_M:g} m from the origin")
     pts = np.asarray(raw, dtype=np.float64).reshape(-1, 2)
     if len(pts) >= 2 and np.allclose(pts[0], pts[-1]):
         log.debug("%s: last centre-line point repeats the first; dropping it", r.source)
@@ -190,6 +200,9 @@ def _control_points(raw: Any, r: _Reader) -> np.ndarray:
     if len(pts) < 4:
         r.fail(f"centerline needs at least 4 points for a closed loop, got {len(pts)}")
     step = np.linalg.norm(np.roll(pts, -1, 0) - pts, axis=1)
+    if step.sum() > MAX_LENGTH_M:
+        r.fail(f"the loop through the centre-line points is {step.sum() / 1000:.1f} km long; "
+               f"at most {MAX_LENGTH_M / 1000:g} km is accepted")
     if step.min() < 1e-3:
         i = int(np.argmin(step))
         r.fail(f"centerline points {i} and {(i + 1) % len(pts)} coincide")
