@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from importlib import metadata
 from types import ModuleType
 
+from tools.console import console
 from tools.errors import is_user_error, one_line, remove_new_empty_outputs, snapshot
 
 #: Options of ``rbc`` itself, allowed before the subcommand.
@@ -131,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
     created = snapshot(getattr(args, name, None) for name in OUTPUT_ARGS)
     try:
-        return int(module.run(args) or 0)
+        with console():
+            return int(module.run(args) or 0)
     except KeyboardInterrupt:
         logging.getLogger("rbc").warning("interrupted")
         remove_new_empty_outputs(created)

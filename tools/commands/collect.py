@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         cone_seed=args.cone_seed, cameras=args.cameras, rate_hz=args.rate_hz, seed=args.seed,
         speed_kmh=args.speed_kmh, speed_unit=args.speed_unit, light_intensity=args.light_intensity,
         light_direction_deg=args.light_direction)
-    progress = Progress(f"collect {args.track}", log)
+    progress = Progress(f"collect {args.track}")
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)
     finally:

@@ -85,6 +85,11 @@ def run(args: argparse.Namespace) -> int:
     if strip.frames:
         print(f"strip {strip.write(out / 'strip.png')}")
     print(f"json  {out / 'result.json'}")
-    etas = ", ".join(f"{lap.eta:.1f} %" for lap in result.laps)
-    print(f"\ndegree of autonomy: {etas}")
+    finished = [lap for lap in result.laps if lap.completed]
+    if finished:
+        print(f"\ndegree of autonomy: {', '.join(f'{lap.eta:.1f} %' for lap in finished)}"
+              + (f" ({len(finished)} of {args.laps} laps finished: interrupted)" if result.interrupted else ""))
+    else:
+        print(f"\ndegree of autonomy: none, interrupted before the first lap was finished "
+              f"({result.sim_time_s:.0f} s driven)")
     return 130 if result.interrupted else 0

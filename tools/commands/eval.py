@@ -11,12 +11,13 @@ from pathlib import Path
 
 from drive_server.model import SteeringModel
 from drive_server.runrecords import code_version, file_sha256, write_json, write_text
+from tools.console import RunProgress
 from tools.errors import CommandError
 from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS, SETUPS
 from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, Runner, spec_dict
-from tools.evaluate.suite import SuiteConfig, run_suite
+from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
 from tools.sim.track_file import get_track
 
 log = logging.getLogger("rbc.eval")
@@ -80,8 +81,8 @@ def run(args: argparse.Namespace) -> int:
             "workers": args.workers, "driver": spec_dict(spec), "autonomy_rule": AUTONOMY_RULE,
             "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}
 
-    progress = _progress()
-    runner = Runner(spec, args.workers, journal, on_result=progress, reuse=reuse)
+    bar = RunProgress(max_runs(cfg))
+    runner = Runner(spec, args.workers, journal, on_result=bar.record, reuse=reuse)
     started = time.perf_counter()
     summary, interrupted = {}, False
     try:
@@ -91,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         log.warning("interrupted: keeping the %d finished runs", len(runner.records))
     finally:
         runner.close(cancel=interrupted)
+        bar.close(finished=not interrupted)
     wall = time.perf_counter() - started
     meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records),
                 resumed_runs=runner.reused)
@@ -110,23 +112,3 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
     print(f"\nwrote {out / 'results.json'}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
     return 0
-
-
-def _progress():
-    try:
-        from tqdm import tqdm
-
-        bar = tqdm(desc="runs", unit="run")
-    except ModuleNotFoundError:
-        bar = None
-
-    def on_result(record: dict) -> None:
-        msg = f"{record['experiment']}={record['value']} seed {record['seed']}: " \
-              f"{'ok' if record['autonomous'] else 'intervention'}"
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix_str(msg)
-        else:
-            log.info(msg)
-
-    return on_result

@@ -73,6 +73,20 @@ def summarize_eta(records: list[dict[str, Any]]) -> dict[str, Any]:
             "n": len(etas), "etas": etas, "autonomous": sum(is_autonomous(r) for r in records)}
 
 
+def max_runs(cfg: SuiteConfig) -> int:
+    """The most runs the suite can take (range searches usually stop earlier): a progress bar's total."""
+    chosen = [e for e in EXPERIMENTS if e.key in cfg.experiments and e.applies_to(cfg.behavior)]
+    total = 0 if any(e.key == "no_variation" for e in chosen) else cfg.seeds
+    for exp in chosen:
+        if exp.measure == "eta":
+            total += len(exp.values) * cfg.seeds
+        elif exp.measure == "range":
+            total += round((exp.origin - exp.lower_cap) / exp.step) + round((exp.upper_cap - exp.origin) / exp.step)
+        else:
+            total += round((exp.upper_cap - exp.origin) / exp.step) + 1
+    return total
+
+
 def run_suite(cfg: SuiteConfig, runner: Runner, workers: int) -> dict[str, Any]:
     """Run the chosen experiments; return the per-experiment summary (records are in runner.records)."""
     chosen = [e for e in EXPERIMENTS if e.key in cfg.experiments and e.applies_to(cfg.behavior)]

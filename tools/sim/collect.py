@@ -118,6 +118,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
     cameras = CAMERAS[: config.cameras]
     img_dir = out_dir / IMAGE_DIR
     pending: list[Path] = []
+    sim: Simulation | None = None
     with LogWriter(out_dir / LOG_NAME) as writer:
         try:
             for k, reverse in enumerate(directions):
@@ -156,6 +157,8 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                     if progress is not None and sim.t >= next_report:
                         next_report = sim.t + 1.0
                         progress(done_before + min(max(0.0, sim.progress), config.laps * sim.track.length), total_m)
+                if progress is not None:  # the laps are done: the bar ends at the full distance
+                    progress(done_before + config.laps * sim.track.length, total_m)
                 clock += sim.t + 10.0
                 result.sim_time_s += sim.t
                 result.laps.extend(sim.laps)
@@ -163,8 +166,12 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                     if lap.interventions:
                         log.warning("%s lap %d: the autopilot needed %d intervention(s) %s; the log has a jump there",
                                     "reverse" if reverse else "forward", lap.lap, lap.n_interventions, lap.causes())
+                sim = None
         except KeyboardInterrupt:
             result.interrupted = True
+            if sim is not None:  # the drive that was cut short: its time and finished laps count too
+                result.sim_time_s += sim.t
+                result.laps.extend(sim.laps)
             for path in pending:  # images of a row that was never written
                 path.unlink(missing_ok=True)
             log.warning("interrupted: %d complete rows in %s", result.rows, out_dir / LOG_NAME)

@@ -31,6 +31,7 @@ from tools.sim.track import (
     TreeSpec,
     WaterSpec,
 )
+from tools.sim.track_reader import Reader
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +86,7 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
     ({azimuth_deg, elevation_deg}), ``start`` ({s}) and ``camera_jitter`` ({pitch_deg, roll_deg}) are
     optional. Every problem raises :class:`TrackError` naming ``source``.
     """
-    r = _Reader(source)
+    r = Reader(source)
     if not isinstance(data, dict):
         r.fail(f"top level must be a JSON object, got {type(data).__name__}")
     for key in _REQUIRED:
@@ -139,49 +140,7 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
     )
 
 
-class _Reader:
-    """Small typed accessors that turn bad values into TrackErrors naming the file."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def fail(self, problem: str):
-        raise TrackError(f"{self.source}: {problem}")
-
-    def number(self, obj: dict, key: str, default: float | None = None, *, lo: float = -math.inf,
-               hi: float = math.inf, where: str = "") -> float:
-        label = f"{where}.{key}" if where else key
-        if key not in obj:
-            if default is None:
-                self.fail(f"missing key {label!r}")
-            return float(default)
-        v = obj[key]
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            self.fail(f"{label!r} must be a number, got {v!r}")
-        if not lo <= v <= hi:
-            self.fail(f"{label!r} = {v} is outside [{lo:g}, {hi:g}]")
-        return float(v)
-
-    def obj(self, data: dict, key: str) -> dict:
-        v = data.get(key, {})
-        if not isinstance(v, dict):
-            self.fail(f"{key!r} must be a JSON object, got {type(v).__name__}")
-        return v
-
-    def list(self, data: dict, key: str) -> list:
-        v = data.get(key, [])
-        if not isinstance(v, list):
-            self.fail(f"{key!r} must be a list, got {type(v).__name__}")
-        return v
-
-    def keys(self, obj: dict, where: str, allowed: set[str]) -> None:
-        unknown = sorted(set(obj) - allowed)
-        if unknown:
-            self.fail(f"unknown key(s) {', '.join(map(repr, unknown))} in {where!r} "
-                      f"(allowed: {', '.join(sorted(allowed))})")
-
-
-def _control_points(raw: Any, r: _Reader) -> np.ndarray:
+def _control_points(raw: Any, r: Reader) -> np.ndarray:
     if not isinstance(raw, list):
         r.fail("'centerline' must be a list of [x, y] points")
     if len(raw) > MAX_CONTROL_POINTS:  # the spline solve is O(n^2) in memory: refuse before allocating
@@ -209,7 +168,7 @@ def _control_points(raw: Any, r: _Reader) -> np.ndarray:
     return pts
 
 
-def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: float, r: _Reader) -> None:
+def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: float, r: Reader) -> None:
     """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself.
 
     Points further apart along the line than pi/2 * clearance must be at least ``clearance`` apart in
@@ -231,7 +190,7 @@ def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: flo
                    f"centre lines {d[i - lo, j]:.1f} m apart, road plus shoulders need {clearance:.1f} m")
 
 
-def _surface(item: Any, i: int, length: float, r: _Reader) -> Surface:
+def _surface(item: Any, i: int, length: float, r: Reader) -> Surface:
     if not isinstance(item, dict):
         r.fail(f"surfaces[{i}] must be an object with from_s, to_s, kind")
     r.keys(item, f"surfaces[{i}]", {"from_s", "to_s", "kind"})
@@ -247,7 +206,7 @@ def _surface(item: Any, i: int, length: float, r: _Reader) -> Surface:
     return Surface(a, b, kind)
 
 
-def _scenery(raw: dict, r: _Reader) -> Scenery:
+def _scenery(raw: dict, r: Reader) -> Scenery:
     r.keys(raw, "scenery", {"theme", "trees", "poles", "water", "kerbs"})
     theme = raw.get("theme", "meadow")
     if theme not in THEMES:

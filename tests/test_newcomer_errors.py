@@ -1,0 +1,149 @@
+"""What a newcomer meets when something is wrong: one line, a hint, exit 2, no traceback, no output left."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from tools.cli import main as rbc
+
+SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
+
+
+def _fails_cleanly(argv: list[str], capsys, expect: str, leaves: list[Path] = ()) -> str:
+    code = rbc(argv)
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip() and "WARNING" not in ln]
+    assert code == 2, err
+    assert "Traceback" not in err
+    assert len(lines) == 1 and lines[0].startswith(f"rbc {argv[0]}: error: "), err
+    assert expect in lines[0]
+    for path in leaves:
+        assert not path.exists(), f"{path} was left behind"
+    return lines[0]
+
+
+def _track(tmp_path: Path, **data) -> str:
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({"name": "t", "version": 1, "road_width": 8.0, **data}))
+    return str(path)
+
+
+def test_train_without_data_folder(tmp_path, capsys):
+    _fails_cleanly(["train", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "run")], capsys,
+                   "no such file or directory", [tmp_path / "run"])
+
+
+def test_train_on_an_empty_folder(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    _fails_cleanly(["train", "--data", str(tmp_path / "empty"), "--out", str(tmp_path / "run")], capsys,
+                   "no driving_log.csv", [tmp_path / "run"])
+
+
+def test_train_on_an_all_garbage_log(tmp_path, capsys):
+    (tmp_path / "g").mkdir()
+    (tmp_path / "g" / "driving_log.csv").write_text("a,b,c\nx,y,z\n")
+    _fails_cleanly(["train", "--data", str(tmp_path / "g"), "--out", str(tmp_path / "run")], capsys,
+                   "no usable samples", [tmp_path / "run"])
+
+
+def test_train_into_a_path_that_cannot_be_a_folder(tmp_path, capsys):
+    pytest.importorskip("torch")
+    (tmp_path / "file").write_text("x")
+    _fails_cleanly(["train", "--data", str(SAMPLE), "--out", str(tmp_path / "file" / "run"), "--epochs", "1",
+                    "--max-steps-per-epoch", "1", "--no-progress"], capsys, "not a directory")
+
+
+def test_train_resume_with_a_corrupt_checkpoint(tmp_path, capsys):
+    pytest.importorskip("torch")
+    run = tmp_path / "run"
+    assert rbc(["train", "--data", str(SAMPLE), "--out", str(run), "--epochs", "1", "--max-steps-per-epoch", "1",
+                "--no-progress", "--threads", "1"]) == 0
+    capsys.readouterr()
+    (run / "model.onnx").unlink()
+    (run / "checkpoint.pt").write_bytes(b"garbage")
+    _fails_cleanly(["train", "--out", str(run), "--resume", "--no-progress"], capsys, "not a readable checkpoint")
+
+
+@pytest.mark.parametrize("command", [["sim", "--autopilot"], ["collect", "--out", "{out}"], ["eval", "--out", "{out}"]])
+def test_unknown_track_name(command, tmp_path, capsys):
+    out = tmp_path / "out"
+    argv = [a.format(out=out) for a in command] + ["--track", "nope"]
+    _fails_cleanly(argv, capsys, "no such track file (built-in tracks: lake, mountain)", [out])
+
+
+@pytest.mark.parametrize(("data", "expect"), [
+    ({"centerline": [[1e300, 0], [0, 1e300], [-1e300, 0], [0, -1e300]]}, "m from the origin"),
+    ({"centerline": [[500 * math.cos(k / 1e4), 500 * math.sin(k / 1e4)] for k in range(100_000)]},
+     "at most 2000 control points"),
+    ({"centerline": [[9000, 9000], [-9000, 9000], [-9000, -9000], [9000, -9000]]}, "at most 20 km"),
+    ({"centerline": [[0, 0], [10, 0]]}, "at least 4 points"),
+])
+def test_invalid_track_files_are_refused_before_anything_is_allocated(data, expect, tmp_path, capsys):
+    out = tmp_path / "out"
+    _fails_cleanly(["collect", "--out", str(out), "--track", _track(tmp_path, **data)], capsys, expect, [out])
+
+
+def test_track_file_that_is_not_json(tmp_path, capsys):
+    path = tmp_path / "bad.json"
+    path.write_text("{not json")
+    _fails_cleanly(["sim", "--autopilot", "--track", str(path)], capsys, "not valid JSON")
+
+
+def test_eval_with_a_file_that_is_not_a_model(tmp_path, capsys):
+    _fails_cleanly(["eval", "--model", str(SAMPLE / "driving_log.csv"), "--out", str(tmp_path / "ev")], capsys,
+                   "as an ONNX model", [tmp_path / "ev"])
+
+
+def test_inspect_a_folder_that_is_not_a_run(tmp_path, capsys):
+    pytest.importorskip("torch")
+    _fails_cleanly(["inspect", str(tmp_path / "nope")], capsys, "not a training run folder")
+
+
+def test_augment_preview_without_data(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    _fails_cleanly(["augment-preview", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "g.png")], capsys,
+                   "no such file or directory", [tmp_path / "g.png"])
+
+
+def test_verbose_shows_the_traceback(tmp_path):
+    with pytest.raises(Exception, match="no such track file"):
+        rbc(["-v", "sim", "--autopilot", "--track", "nope"])
+
+
+@pytest.mark.parametrize(("command", "extra", "hidden"), [
+    (["train", "--data", "x", "--out", "y"], "train", "torch"),
+    (["inspect", "run"], "train", "torch"),
+    (["augment-preview", "--data", "x", "--out", "g.png"], "plots", "matplotlib"),
+])
+def test_a_missing_extra_is_named_with_its_install_line(command, extra, hidden, monkeypatch, capsys):
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == hidden else real(name, *a))
+    monkeypatch.setitem(sys.modules, hidden, None)  # and an import of it fails, as when it is not installed
+    assert rbc(command) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f'rbc {command[0]}: error: needs the package(s) {hidden} (hint: pip install -e ".[{extra}]")'
+
+
+def test_version(capsys):
+    assert rbc(["--version"]) == 0
+    assert capsys.readouterr().out.startswith("rbc ")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_train_into_a_read_only_folder(tmp_path, capsys):
+    pytest.importorskip("torch")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        _fails_cleanly(["train", "--data", str(SAMPLE), "--out", str(ro / "run"), "--no-progress"], capsys,
+                       "permission denied")
+    finally:
+        ro.chmod(0o700)
