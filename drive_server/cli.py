@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 
 from drive_server.guard import FallbackPolicy
+from drive_server.helpformat import DefaultsHelpFormatter
 from drive_server.model import InferenceConfig, ModelError, SteeringModel
 from drive_server.models_dir import default_model_path
 from drive_server.pipeline import DriveConfig
@@ -24,20 +25,24 @@ log = logging.getLogger("drive_server")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="drive_server", description=__doc__.splitlines()[0].split(": ", 1)[1])
+    p = argparse.ArgumentParser(prog="drive_server", description=__doc__.splitlines()[0].split(": ", 1)[1],
+                                formatter_class=DefaultsHelpFormatter)
     p.add_argument("--model", type=Path, default=None,
                    help="ONNX model (default: the bundled models/pretrained/simplistic.onnx)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default: localhost only)")
     p.add_argument("--port", type=int, default=4567, help="port (default 4567, the simulator's; 0 = any free)")
     drive, inference, fallback = DriveConfig, InferenceConfig, FallbackPolicy  # the defaults, defined once
     p.add_argument("--speed-limit", type=float, default=drive.speed_limit_kmh,
-                   help="v_l of Eq. 14 in km/h (default %(default)s)")
+                   help="speed limit in km/h of the throttle/brake control law "
+                        "(v_l of Eq. 14; default %(default)s)")
     p.add_argument("--steer-limit", type=float, default=drive.steer_limit_deg,
-                   help="steering limit in degrees: scales the model's -1..1 output and is delta of Eq. 14 "
-                        "(default %(default)s)")
-    p.add_argument("--tau", type=float, default=drive.tau, help="tau of Eq. 14, in [0, 1] (default %(default)s)")
-    p.add_argument("--telemetry-speed-unit", choices=[u.value for u in SpeedUnit], default=drive.speed_unit.value,
-                   help="unit of the telemetry speed: mph (stock Udacity simulator, default) or kmh (paper's)")
+                   help="steering limit in degrees: scales the model's -1..1 output (delta of Eq. 14; "
+                        "default %(default)s)")
+    p.add_argument("--tau", type=float, default=drive.tau,
+                   help="gain of the throttle/brake law, 0..1 (tau of Eq. 14; default %(default)s)")
+    p.add_argument("--speed-unit", "--telemetry-speed-unit", dest="telemetry_speed_unit",
+                   choices=[u.value for u in SpeedUnit], default=drive.speed_unit.value,
+                   help="unit of the telemetry speed: mph like the stock Udacity simulator, or kmh like the paper's")
     p.add_argument("--threads", type=int, default=inference.threads,
                    help="ONNX Runtime intra-op threads (default %(default)s)")
     p.add_argument("--provider", default=inference.provider,
@@ -55,7 +60,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stock-transport", action="store_true",
                    help="disable the WebSocket transport tuning (for comparison benchmarks)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    p.add_argument("--version", action="version", version=f"drive_server {_version()}",
+                   help="print the version and exit")
     return p
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("robust-behavioral-cloning")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from importlib import metadata
 from types import ModuleType
 
+from drive_server.helpformat import DefaultsHelpFormatter
 from tools.console import console
 from tools.errors import is_user_error, one_line, remove_new_empty_outputs, snapshot
 
@@ -93,7 +94,8 @@ def load(cmd: Subcommand) -> ModuleType:
 
 
 def subcommand_parser(cmd: Subcommand, module: ModuleType) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=f"rbc {cmd.name}", description=cmd.help)
+    parser = argparse.ArgumentParser(prog=f"rbc {cmd.name}", description=cmd.help,
+                                     formatter_class=DefaultsHelpFormatter)
     module.add_arguments(parser)
     return parser
 

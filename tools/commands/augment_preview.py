@@ -5,17 +5,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from models.behavior import Approach, Arch, Behavior
+from tools.arguments import add_pipeline_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", required=True, metavar="DIR", help="recording directory or log")
-    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default="simplistic")
-    parser.add_argument("--arch", choices=[a.value for a in Arch], default="shallow")
-    parser.add_argument("--approach", choices=[a.value for a in Approach], default="ours")
+    add_pipeline_arguments(parser)
     parser.add_argument("--out", required=True, type=Path, help="PNG file to write")
     parser.add_argument("--n", type=int, default=16, help="number of samples")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="which samples and augmentations are drawn")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,7 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from protocol import SpeedUnit
+from tools.arguments import add_speed_unit_argument
 from tools.console import Progress
 from tools.sim.collect import CollectConfig
 
@@ -30,8 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="autopilot reaction times and driving line (default %(default)s)")
     p.add_argument("--speed-kmh", type=float, default=d.speed_kmh,
                    help="autopilot cruising speed (default %(default)s)")
-    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=d.speed_unit,
-                   help="unit of the speed column (default mph, like Udacity; the paper's simulator: kmh)")
+    add_speed_unit_argument(p, d.speed_unit, "the log's speed column")
     p.add_argument("--light-intensity", type=float, default=d.light_intensity,
                    help="scene light intensity (default %(default)s)")
     p.add_argument("--light-direction", type=float, default=d.light_direction_deg,

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol.facts import MAX_STEERING_DEG
+from protocol.facts import CAMERAS, MAX_STEERING_DEG
 from tools.errors import CommandError
 from tools.wire.frames import log_frames
 from tools.wire.unity_client import ConnectionClosed, UnityWireClient
@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="send a manual-mode (null) frame instead of every K-th frame")
     p.add_argument("--locale", choices=("dot", "comma"), default="dot",
                    help="decimal separator of the telemetry numbers (comma: like a European Windows)")
-    p.add_argument("--camera", choices=("center", "left", "right"), default="center")
+    p.add_argument("--camera", choices=CAMERAS, default=CAMERAS[0], help="which camera's frames of the log to send")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
 
 

@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 
 from drive_server.pipeline import DriveConfig
-from protocol import SpeedUnit
+from tools.arguments import add_speed_unit_argument
 from tools.console import Progress
 from tools.errors import CommandError
 from tools.sim.scenario import ScenarioConfig
@@ -39,13 +39,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reverse", action="store_true", help="spawn facing the other way and drive the lap reversed")
     law = DriveConfig
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
-                   help="v_l of Eq. 14 in km/h for --model (default %(default)s)")
+                   help="speed limit in km/h of the control law for --model (v_l of Eq. 14; default %(default)s)")
     p.add_argument("--steer-limit", type=float, default=law.steer_limit_deg,
-                   help="delta of Eq. 14 in degrees for --model (default %(default)s)")
-    p.add_argument("--tau", type=float, default=law.tau, help="tau of Eq. 14 for --model (default %(default)s)")
+                   help="steering limit in degrees for --model: scales the model's -1..1 output "
+                        "(delta of Eq. 14; default %(default)s)")
+    p.add_argument("--tau", type=float, default=law.tau,
+                   help="gain of the throttle/brake law for --model, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
-    p.add_argument("--speed-unit", choices=[u.value for u in SpeedUnit], default=d.speed_unit,
-                   help="telemetry speed unit (default mph like the stock simulator)")
+    add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
     p.add_argument("--realtime", action="store_true",
                    help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
     p.add_argument("--control-hz", type=float, default=d.control_hz,

@@ -4,24 +4,20 @@ from __future__ import annotations
 
 import argparse
 
-from models.behavior import Approach, Arch, Behavior
 from models.train_config import TrainConfig
+from tools.arguments import add_pipeline_arguments
 from tools.errors import CommandError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", default=[], metavar="DIR",
                         help="recording directory or driving log (repeat to combine several)")
-    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default=TrainConfig.behavior,
-                        help="driving behavior: sets zero-steer balancing, augmentations and epochs (paper Tables 4-6)")
-    parser.add_argument("--arch", choices=[a.value for a in Arch], default=TrainConfig.arch,
-                        help="network: the paper's shallow CNN or NVIDIA's PilotNet")
-    parser.add_argument("--approach", choices=[a.value for a in Approach], default=TrainConfig.approach,
-                        help="ours: the paper's balancing + augmentation; nvidia: crop/YUV, no balancing")
+    add_pipeline_arguments(parser)
     parser.add_argument("--out", required=True, metavar="RUN_DIR", help="run directory (config, history, model)")
     parser.add_argument("--epochs", type=int, help="default: the paper's 5 / 10 / 5 by behavior")
     parser.add_argument("--aug-loops", type=int, default=TrainConfig.aug_loops,
-                        help="augmentation loops chi: passes over the training data per epoch (default %(default)s)")
+                        help="augmentation loops per epoch: each pass over the training data draws new "
+                             "augmentations (chi of the paper; default %(default)s)")
     parser.add_argument("--batch-size", type=int, default=TrainConfig.batch_size, help="default %(default)s")
     parser.add_argument("--seed", type=int, default=TrainConfig.seed, help="split, balancing, augmentation and "
                         "initialisation seed (default %(default)s)")

@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-from models.behavior import Approach, Arch, Behavior
+from tools.arguments import add_pipeline_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", default=[], metavar="DIR",
                         help="recording(s) whose frames are repeated to the paper's size (default: synthetic frames)")
-    parser.add_argument("--behavior", choices=[b.value for b in Behavior], default="simplistic")
-    parser.add_argument("--arch", choices=[a.value for a in Arch], default="shallow")
-    parser.add_argument("--approach", choices=[a.value for a in Approach], default="ours")
+    add_pipeline_arguments(parser)
     parser.add_argument("--steps", type=int, default=150, help="batches per measurement")
     parser.add_argument("--repeat", type=int, default=3, help="measurements per figure (median reported)")
     parser.add_argument("--threads", type=int, help="PyTorch threads (default: as rbc train)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic frames and augmentations")
 
 
 def run(args: argparse.Namespace) -> int:

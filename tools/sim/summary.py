@@ -19,7 +19,7 @@ def print_summary(result, speed_limit_note: str) -> None:
               f"{lap.mean_speed_kmh:>5.1f}  {lap.cte_rms_m:>7.2f}  {lap.cte_max_m:>7.2f}  {lap.collisions:>4}  "
               f"{lap.lane_departures:>4}{flag}")
     if any(lap.eta_clamped for lap in result.laps):
-        print("* Eq. 1 went below 0 (more intervention time than lap time) and was clamped at 0")
+        print("* more intervention time than lap time: the degree of autonomy (Eq. 1) would be negative; shown as 0")
     for lap in result.laps:
         for i in lap.interventions:
             print(f"    lap {lap.lap}: {i.cause:<9} at s={i.s:7.1f} m  (x={i.x:7.1f}, y={i.y:7.1f})  t={i.t:7.1f} s")
