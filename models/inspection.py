@@ -153,24 +153,33 @@ def plot_activations(out: Path, data, pipeline, model, count: int, seed: int) ->
     pool = data.train[data.steering[data.train] != 0] if (data.steering[data.train] != 0).any() else data.train
     picks = np.sort(rng.choice(pool, size=min(count, len(pool)), replace=False))
     images = data.cache.frames[0, picks]
+    x = torch.from_numpy(to_input_tensor(images, training_contract(pipeline.contract)))
     with torch.no_grad():
-        acts = conv_activations(model, torch.from_numpy(to_input_tensor(images, training_contract(pipeline.contract))))
+        acts = conv_activations(model, x)
+        predicted = model.eval()(x).reshape(-1).numpy()
     layers = len(acts)
     fig, axes = plt.subplots(len(picks), layers + 2, figsize=(2.6 * (layers + 2), 2.4 * len(picks)), squeeze=False)
     for row, img in enumerate(images):
         shown = cv2.cvtColor(img, cv2.COLOR_YUV2RGB) if pipeline.contract.color == "yuv" else img
         axes[row, 0].imshow(shown)
-        axes[row, 0].set_title(f"input, steering {data.steering[picks[row]]:+.3f}", fontsize=8)
+        axes[row, 0].set_title(f"recorded steering {data.steering[picks[row]]:+.3f}\n"
+                               f"predicted {predicted[row]:+.3f}", fontsize=8)
         for k, act in enumerate(acts):
             a = act[row].numpy()
-            axes[row, k + 1].imshow(_channel_mosaic(a), cmap="inferno", interpolation="nearest")
-            axes[row, k + 1].set_title(f"conv{k + 1}: {a.shape[0]} x {a.shape[1]}x{a.shape[2]}", fontsize=8)
+            im = axes[row, k + 1].imshow(_channel_mosaic(a), cmap="inferno", interpolation="nearest", vmin=0, vmax=1)
+            axes[row, k + 1].set_title(f"conv{k + 1}: {a.shape[0]} maps of {a.shape[1]}x{a.shape[2]}", fontsize=8)
+            bar = fig.colorbar(im, ax=axes[row, k + 1], fraction=0.046, pad=0.02)
+            bar.ax.tick_params(labelsize=6)
+            if k == len(acts) - 1:
+                bar.set_label("activation / layer max", fontsize=7)
         vbp = visual_backprop([a[row:row + 1] for a in acts])
         vbp = cv2.resize(vbp, (img.shape[1], img.shape[0]), interpolation=cv2.INTER_LINEAR)
         vbp = vbp / (vbp.max() or 1.0)
         axes[row, -1].imshow(shown)
-        axes[row, -1].imshow(vbp, cmap="inferno", alpha=0.6)
-        axes[row, -1].set_title("VisualBackProp mask", fontsize=8)
+        mask = axes[row, -1].imshow(vbp, cmap="inferno", alpha=0.6, vmin=0, vmax=1)
+        axes[row, -1].set_title("where the network looks\n(VisualBackProp)", fontsize=8)
+        bar = fig.colorbar(mask, ax=axes[row, -1], fraction=0.046, pad=0.02)
+        bar.ax.tick_params(labelsize=6)
         for ax in axes[row]:
             ax.axis("off")
     fig.tight_layout()

@@ -21,6 +21,7 @@ import numpy as np
 from protocol.facts import DEPLOY_SPEED_KMH, JPEG_QUALITY
 from tools.sim.cones import place_cones
 from tools.sim.render import Renderer
+from tools.sim.text import draw_text
 from tools.sim.track import Track
 from tools.sim.world import Pose, clear_caches, get_world
 
@@ -150,8 +151,7 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
 
 def _label(img: np.ndarray, text: str) -> np.ndarray:
     out = img.copy()
-    cv2.putText(out, text, (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 0), 2, cv2.LINE_AA)
-    cv2.putText(out, text, (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
+    draw_text(out, text, (5, 16), px=13, box=True)
     return out
 
 

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     write_json(out / "result.json", result.to_dict())
     print(f"\nmap   {write_trajectory_map(result, out / 'map.png')}")
     if strip.frames:
-        print(f"strip {strip.write(out / 'strip.png')}")
+        print(f"strip {strip.write(out / 'strip.jpg')}")
     print(f"json  {out / 'result.json'}")
     finished = [lap for lap in result.laps if lap.completed]
     if finished:

@@ -55,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-lap-time", type=float, default=None, metavar="S", help="give up a lap after S sim seconds")
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the full result as JSON")
     p.add_argument("--map", type=Path, default=None, metavar="PNG", help="top-down trajectory map")
-    p.add_argument("--strip", type=Path, default=None, metavar="PNG", help="grid of camera frames")
+    p.add_argument("--strip", type=Path, default=None, metavar="IMAGE",
+                   help="grid of camera frames with steering, throttle, speed and take-overs (.jpg or .png)")
     p.add_argument("--strip-every", type=float, default=8.0, metavar="S", help="strip: one frame every S seconds")
     p.add_argument("--video", type=Path, default=None, metavar="MP4", help="annotated camera video (mp4v)")
 

@@ -62,6 +62,7 @@ class Experiment:
     behaviors: tuple[str, ...] = BEHAVIORS
     realtime: bool = False
     fixed: dict[str, Any] = field(default_factory=dict)  # other ScenarioConfig overrides
+    axis: str = ""  # what a plot's x axis says, in words with the unit
 
     def applies_to(self, behavior: str) -> bool:
         return behavior in self.behaviors
@@ -78,15 +79,19 @@ EXPERIMENTS: tuple[Experiment, ...] = (
     Experiment("obstacles", "Scene obstacle variation", "eta", "cones", values=(20, 10, 0),
                behaviors=("collision",), fixed={"cone_seed": TEST_CONE_SEED}),
     Experiment("light_intensity", "Scene light intensity variation", "range", "light_intensity",
-               origin=1.0, step=0.1, lower_cap=0.1, upper_cap=2.5, unit="cd"),
+               origin=1.0, step=0.1, lower_cap=0.1, upper_cap=2.5, unit="cd",
+               axis="change of light intensity from the default 1.0 (cd)"),
     Experiment("light_direction", "Scene light direction variation", "range", "light_direction_deg",
-               origin=0.0, step=1.0, lower_cap=-35.0, upper_cap=35.0, unit="°"),
+               origin=0.0, step=1.0, lower_cap=-35.0, upper_cap=35.0, unit="°",
+               axis="sun direction, rotated from the default (degrees)"),
     Experiment("position", "Vehicle position variation", "eta", "spawn_fraction", values=(0.5,)),
     Experiment("orientation", "Vehicle orientation variation", "range", "yaw_offset_deg",
-               origin=0.0, step=5.0, lower_cap=-90.0, upper_cap=90.0, unit="°"),
+               origin=0.0, step=5.0, lower_cap=-90.0, upper_cap=90.0, unit="°",
+               axis="heading of the car at the start, off the road's direction (degrees, + = left)"),
     Experiment("heading_inversion", "Vehicle heading inversion", "eta", "reverse", values=(True,)),
     Experiment("speed_limit", "Vehicle speed limit variation", "max", "speed_limit_kmh",
-               origin=30.0, step=5.0, lower_cap=30.0, upper_cap=100.0, unit="km/h", realtime=True),
+               origin=30.0, step=5.0, lower_cap=30.0, upper_cap=100.0, unit="km/h", realtime=True,
+               axis="speed limit (km/h)"),
 )
 
 

@@ -124,8 +124,8 @@ def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out
         ax.scatter([x for x, o in zip(xs, ok, strict=True) if not o],
                    [y for y, o in zip(ys, ok, strict=True) if not o], color="tab:red", marker="x",
                    label="intervention(s)", zorder=2)
-        label = f"{exp.parameter} {'offset ' if exp.measure == 'range' else ''}({exp.unit})"
-        ax.set(xlabel=label, ylabel="η (%)", title=exp.title, ylim=(min(0, min(ys) - 5), 105))
+        ax.set(xlabel=exp.axis or f"{exp.title} ({exp.unit})", ylabel="degree of autonomy η (%)", title=exp.title,
+               ylim=(min(0, min(ys) - 5), 105))
         ax.grid(alpha=0.3)
         ax.legend(loc="lower left", fontsize=8)
         fig.tight_layout()

@@ -11,6 +11,7 @@ import numpy as np
 from protocol import SpeedUnit, SteerCommand
 from protocol.facts import DEPLOY_SPEED_KMH
 from tools.sim.rules import (
+    Intervention,
     LapResult,
     Rules,
 )
@@ -127,3 +128,4 @@ class FrameEvent:
     rgb: np.ndarray  # the centre camera, as encoded into the telemetry
     state: VehicleState
     command: SteerCommand  # the command in force when the frame was taken
+    intervention: Intervention | None = None  # the latest take-over (the car was put back on the road)

@@ -73,7 +73,7 @@ def run_scenario(config: ScenarioConfig, driver: Any, progress: Callable[[float,
         driver.send(Frame(payload=payload, t=sim.t, truth=sim.vehicle.state))
         frames += 1
         if on_frame is not None and rgb is not None:
-            on_frame(FrameEvent(sim.t, sim.lap, rgb, sim.vehicle.state, sim.command))
+            on_frame(FrameEvent(sim.t, sim.lap, rgb, sim.vehicle.state, sim.command, sim.last_intervention))
 
     driver.start(Scene(track=sim.track, cones=sim.cones, direction=sim.direction, seed=config.seed,
                        vehicle=sim.params, control_period_s=per_command / fps))

@@ -66,6 +66,7 @@ class Simulation:
         self.referee = Referee(rules, track.road_width, self.direction, self.cones, self.params.length_m,
                                self.params.width_m)
         self.scorer = LapScorer(1, rules)
+        self.last_intervention: Intervention | None = None  # for pictures: the latest take-over, if any
         self._trace: list[tuple[float, float, float, float, float, int]] = []
         self.renderer = None
         if render:
@@ -133,6 +134,7 @@ class Simulation:
     def _intervene(self, cause: Cause, cx: float, cy: float) -> None:
         """A person takes over: the car goes back on the line a few metres on, aligned, rolling."""
         self.scorer.interventions.append(Intervention(cause, self.proj.s, cx, cy, self.t))
+        self.last_intervention = self.scorer.interventions[-1]
         log.debug("t=%.2f s: intervention (%s) at s=%.1f m", self.t, cause, self.proj.s)
         s = self.proj.s + self.direction * self.rules.reset_ahead_m
         for _ in range(int(self.track.length)):

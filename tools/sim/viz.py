@@ -17,12 +17,12 @@ import numpy as np
 
 from protocol.facts import MAX_STEERING_DEG
 from tools.sim.scenario import FrameEvent, RunResult
+from tools.sim.text import draw_text
 from tools.sim.track import Track
 from tools.sim.vehicle import mps_to_kmh
 
 log = logging.getLogger(__name__)
 
-_FONT = cv2.FONT_HERSHEY_SIMPLEX
 _BG = (34, 40, 36)  # BGR
 _GRASS = (52, 70, 54)
 _ROAD = (92, 92, 92)
@@ -59,13 +59,8 @@ class _View:
 
 def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.5, color=_TEXT, thick: int = 1,
           box: bool = False) -> None:
-    """Anti-aliased text; ``box`` puts a dark plate behind it (labels over the map or camera frames)."""
-    if box:
-        (w, h), base = cv2.getTextSize(text, _FONT, scale, thick)
-        x, y = org
-        sub = img[max(0, y - h - 3):y + base + 1, max(0, x - 3):x + w + 3]
-        sub[:] = (sub * 0.35).astype(np.uint8)
-    cv2.putText(img, text, org, _FONT, scale, color, thick, cv2.LINE_AA)
+    """Anti-aliased text (``scale`` as OpenCV's: 0.5 is about 14 px); ``box`` puts a dark plate behind it."""
+    draw_text(img, text, org, px=max(9, round(scale * 28)), color=color, box=box)
 
 
 def _draw_road(img: np.ndarray, view: _View, track: Track) -> None:
@@ -167,8 +162,8 @@ def _legend(img: np.ndarray, x: int, result: RunResult, track: Track, vmax: floa
     _text(img, f"limit {cfg.speed_limit_kmh:g} km/h, {mode}", (x, y), 0.45, _MUTED)
     y += 26
     for lap in result.laps:
-        state = ("" if lap.completed else " (not finished)") + (" (clamped)" if lap.eta_clamped else "")
-        _text(img, f"lap {lap.lap}: eta {lap.eta:.1f} %{state}", (x, y), 0.5)
+        state = ("" if lap.completed else " (not finished)") + (" (below 0, shown as 0)" if lap.eta_clamped else "")
+        _text(img, f"lap {lap.lap}: autonomy η {lap.eta:.1f} %{state}", (x, y), 0.5)
         y += 18
         _text(img, f"  {lap.lap_time_s:.1f} s, {lap.mean_speed_kmh:.1f} km/h, cte rms {lap.cte_rms_m:.2f} m",
               (x, y), 0.42, _MUTED)
@@ -227,7 +222,16 @@ def annotate(event: FrameEvent, speed_unit: str = "km/h") -> np.ndarray:
     # + steering = right (Unity's convention): the bar grows to the right
     cv2.rectangle(bgr, (min(cx, end), y0 + 2), (max(cx, end), y0 + 8), (0, 220, 255), -1)
     cv2.line(bgr, (cx, y0 - 3), (cx, y0 + 13), (255, 255, 255), 1)
+    iv = event.intervention
+    if iv is not None and 0.0 <= event.t - iv.t < TAKEOVER_MARK_S:  # why the car just jumped back to the road
+        cv2.rectangle(bgr, (0, 0), (w - 1, h - 1), _CAUSE_COLORS.get(str(iv.cause), (60, 60, 230)), 6)
+        _text(bgr, f"TAKE-OVER: {str(iv.cause).replace('_', ' ')} at {iv.t:.1f} s, car put back on the road",
+              (8, 94), 0.55, (80, 80, 255), box=True)
     return bgr
+
+
+#: How long after a take-over the camera overlay marks it (simulated seconds).
+TAKEOVER_MARK_S = 1.5
 
 
 class StripCollector:
@@ -237,10 +241,13 @@ class StripCollector:
         self.every_s, self.limit = every_s, limit
         self.frames: list[np.ndarray] = []
         self._next = 0.0
+        self._last_takeover: object = None  # every take-over gets a frame of its own
 
     def __call__(self, event: FrameEvent) -> None:
-        if event.t >= self._next and len(self.frames) < self.limit:
+        new_takeover = event.intervention is not None and event.intervention is not self._last_takeover
+        if (event.t >= self._next or new_takeover) and len(self.frames) < self.limit:
             self._next = event.t + self.every_s
+            self._last_takeover = event.intervention
             self.frames.append(annotate(event))
 
     def write(self, path: str | Path, cols: int = 4) -> Path:
@@ -254,7 +261,10 @@ class StripCollector:
             sheet[4 + r * (h + 4):4 + r * (h + 4) + h, 4 + c * (w + 4):4 + c * (w + 4) + w] = f
         out = Path(path)
         out.parent.mkdir(parents=True, exist_ok=True)
-        if not cv2.imwrite(str(out), sheet):
+        # JPEG for .jpg (a tenth of the size); PNG at its best compression otherwise
+        params = [cv2.IMWRITE_JPEG_QUALITY, 85] if out.suffix.lower() in (".jpg", ".jpeg") else \
+            [cv2.IMWRITE_PNG_COMPRESSION, 9]
+        if not cv2.imwrite(str(out), sheet, params):
             raise OSError(f"cannot write {out}")
         return out
 
