@@ -147,3 +147,48 @@ def test_train_into_a_read_only_folder(tmp_path, capsys):
                        "permission denied")
     finally:
         ro.chmod(0o700)
+
+
+def _interrupted(argv: list[str], ready, tmp_path: Path) -> tuple[int, str]:
+    """Run ``rbc argv`` as a process; Ctrl-C it 0.5 s after ``ready(tmp_path, output_so_far)``; (exit code, output)."""
+    import signal
+    import subprocess
+    import threading
+    import time
+
+    env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    proc = subprocess.Popen([sys.executable, "-m", "tools.cli", *argv], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=env)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+    reader.start()
+    deadline = time.monotonic() + 60
+    while not ready(tmp_path, "".join(lines)) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.5)  # let it do some work
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=60)
+    reader.join(timeout=10)
+    return proc.returncode, "".join(lines)
+
+
+@pytest.mark.slow
+def test_an_interrupted_collect_reports_the_rows_and_time_it_kept(tmp_path):
+    def rows_written(d: Path, _: str) -> bool:
+        log = d / "c" / "driving_log.csv"
+        return log.is_file() and log.stat().st_size > 0
+
+    code, out = _interrupted(["collect", "--out", "c", "--cameras", "1", "--laps", "3"], rows_written, tmp_path)
+    assert code == 130
+    rows = int(next(ln for ln in out.splitlines() if ln.startswith("rows")).split()[1])
+    simulated = float(next(ln for ln in out.splitlines() if ln.startswith("time")).split()[1])
+    assert rows == len((tmp_path / "c" / "driving_log.csv").read_text().splitlines()) > 0
+    assert simulated == pytest.approx(rows / 15.0, abs=1.0)  # rows at 15 Hz of simulated time
+
+
+@pytest.mark.slow
+def test_an_interrupted_demo_says_no_lap_was_finished(tmp_path):
+    code, out = _interrupted(["demo", "--out", "d", "--laps", "3"], lambda d, text: "listening on" in text, tmp_path)
+    assert code == 130, out
+    line = next(ln for ln in out.splitlines() if ln.startswith("degree of autonomy:"))
+    assert "interrupted before the first lap was finished" in line or "laps finished: interrupted" in line, line

@@ -69,11 +69,14 @@ def run(args: argparse.Namespace) -> int:
         url = server.start()
     except ServerStartError as exc:
         raise CommandError(str(exc)) from exc
-    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track}")
+    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track}", flush=True)
     progress = Progress(f"demo {config.track}")
     try:
         with SocketDriver(url) as driver:
             result = run_scenario(config, driver, progress=progress, on_frame=strip)
+    except KeyboardInterrupt:  # before the lap began (world building, connecting): nothing was driven
+        print("\ndegree of autonomy: none, interrupted before the first lap was finished (0 s driven)")
+        return 130
     finally:
         progress.close()
         server.cleanup()
