@@ -31,9 +31,9 @@ def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
     augmented = draw_params(steering[kept], sides[kept], pipeline.augment, rng).steering
     bins = np.linspace(-1, 1, 52)
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.4), sharex=True)
-    for ax, values, title in zip(axes, (steering, steering[kept], augmented),
-                                 ("recorded (training split)", f"one balanced pass (lambda {pipeline.deletion_rate})",
-                                  "balanced + augmented"), strict=True):
+    titles = ("recorded (training split)", f"one balanced pass ({pipeline.deletion_rate:.0%} of zero-steer dropped)",
+              "balanced + augmented")
+    for ax, values, title in zip(axes, (steering, steering[kept], augmented), titles, strict=True):
         ax.hist(values, bins=bins, color="tab:blue")
         zeros = int((values == 0).sum())
         ax.set_title(f"{title}\n{len(values)} samples, {zeros} exactly zero", fontsize=9)

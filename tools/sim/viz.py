@@ -163,7 +163,7 @@ def _legend(img: np.ndarray, x: int, result: RunResult, track: Track, vmax: floa
     y += 26
     for lap in result.laps:
         state = ("" if lap.completed else " (not finished)") + (" (below 0, shown as 0)" if lap.eta_clamped else "")
-        _text(img, f"lap {lap.lap}: autonomy η {lap.eta:.1f} %{state}", (x, y), 0.5)
+        _text(img, f"lap {lap.lap}: degree of autonomy {lap.eta:.1f} %{state}", (x, y), 0.5)
         y += 18
         _text(img, f"  {lap.lap_time_s:.1f} s, {lap.mean_speed_kmh:.1f} km/h, cte rms {lap.cte_rms_m:.2f} m",
               (x, y), 0.42, _MUTED)
