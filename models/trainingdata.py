@@ -1,44 +1,80 @@
-"""Logs -> decoded frames -> seeded train/validation split: what training, benchmarks and inspection share."""
+"""Logs -> decoded frames -> speed filter -> seeded train/validation split: what training, benchmarks and
+inspection share, so inspection sees exactly the split training used."""
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from models.behavior import Pipeline
 from models.framecache import FrameCache, build_cache
-from models.split import split_indices
+from models.split import SplitKind, SplitSpec, make_split
 from protocol.datalog import DataLogError, DataSet, read_logs
+from protocol.units import SpeedUnit, to_kmh
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DataOptions:
+    """Which rows are used and how they are split. The paper's defaults: every row, random split."""
+
+    split: SplitSpec = field(default_factory=lambda: SplitSpec(SplitKind.RANDOM))
+    min_speed: float = 0.0  # rows recorded below this speed are dropped (0: none)
+    min_speed_unit: SpeedUnit | str = SpeedUnit.MPH
+    speed_unit: SpeedUnit | str = SpeedUnit.MPH  # unit of the log's speed column
+
+    def slow(self, speeds: np.ndarray) -> np.ndarray:
+        """Rows slower than ``min_speed``, comparing both speeds in km/h."""
+        if self.min_speed <= 0:
+            return np.zeros(len(speeds), dtype=bool)
+        return to_kmh(np.asarray(speeds, np.float64), self.speed_unit) < to_kmh(self.min_speed, self.min_speed_unit)
 
 
 @dataclass
 class PreparedData:
     dataset: DataSet
     cache: FrameCache
-    usable: np.ndarray  # positions of samples whose frames all decoded
+    usable: np.ndarray  # positions of samples whose frames all decoded and that passed the speed filter
     train: np.ndarray  # cache positions of training samples (log order)
     val: np.ndarray  # cache positions of validation samples (log order)
     steering: np.ndarray  # float32, every sample
     has_sides: np.ndarray  # bool, every sample (False when the pipeline uses no side cameras)
+    counts: dict[str, int] = field(default_factory=dict)
+    split: SplitSpec = field(default_factory=SplitSpec)
+
+    def summary(self, options: DataOptions | None = None) -> str:
+        """One line: rows read, skipped, dropped and kept, and how the kept ones were split."""
+        c = self.counts
+        slow = f" below {options.min_speed:g} {SpeedUnit(options.min_speed_unit).value}" if options else " too slow"
+        gap = f", {c['gap']} dropped beside held-out blocks" if c.get("gap") else ""
+        return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images), "
+                f"{c['unreadable']} with unreadable frames, {c['slow']} dropped{slow}; {c['kept']} kept: "
+                f"{c['train']} training + {c['val']} validation ({self.split.kind.value} split{gap})")
 
 
-def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, val_fraction: float = 0.2,
+def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, options: DataOptions = DataOptions(),
                  workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
     dataset = read_logs(data)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
+    speeds = np.array([s.speed for s in dataset.samples], np.float64)
+    slow = options.slow(speeds)
     cache = build_cache(dataset.samples, pipeline.contract, cameras, workers=workers, progress=progress)
-    usable = np.flatnonzero(cache.valid)
+    usable = np.flatnonzero(cache.valid & ~slow)
     if len(usable) < 2:
-        raise DataLogError(f"only {len(usable)} samples with readable frames in {dataset.logs}")
-    train, val = split_indices(len(usable), seed, val_fraction)
+        raise DataLogError(f"only {len(usable)} samples with readable frames"
+                           f"{' at or above the minimum speed' if slow.any() else ''} in {dataset.logs}")
+    train, val = make_split(len(usable), seed, options.split)
     steering = np.array([s.steering for s in dataset.samples], np.float32)
     sides = np.array([s.has_sides for s in dataset.samples], bool) & pipeline.augment.uses_side_cameras
     if pipeline.augment.uses_side_cameras and not sides.any():
         log.warning("no sample has left and right frames: perspective shifts are skipped")
-    return PreparedData(dataset, cache, usable, usable[train], usable[val], steering, sides)
+    counts = {"rows": sum(r.rows for r in dataset.reports), "skipped": sum(len(r.skipped) for r in dataset.reports),
+              "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
+              "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
+              "gap": int(len(usable) - len(train) - len(val))}
+    return PreparedData(dataset, cache, usable, usable[train], usable[val], steering, sides, counts, options.split)
