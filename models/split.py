@@ -28,7 +28,7 @@ class SplitSpec:
 
     kind: SplitKind | str = SplitKind.BLOCKS
     val_fraction: float = VAL_FRACTION
-    block_frames: int = 100  # ~7-11 s of driving at the simulator's 9-15 Hz
+    block_frames: int = 50  # ~3-6 s of driving at the simulator's 9-15 Hz
     gap_frames: int = 10  # training frames dropped on each side of a held-out block
 
     def __post_init__(self) -> None:

@@ -50,10 +50,14 @@ class PreparedData:
     def summary(self, options: DataOptions | None = None) -> str:
         """One line: rows read, skipped, dropped and kept, and how the kept ones were split."""
         c = self.counts
-        slow = f" below {options.min_speed:g} {SpeedUnit(options.min_speed_unit).value}" if options else " too slow"
+        if options is None or options.min_speed > 0:
+            unit = f" {SpeedUnit(options.min_speed_unit).value}" if options else ""
+            slow = f"{c['slow']} dropped below {options.min_speed if options else 0:g}{unit}"
+        else:
+            slow = "no speed filter"
         gap = f", {c['gap']} dropped beside held-out blocks" if c.get("gap") else ""
         return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images), "
-                f"{c['unreadable']} with unreadable frames, {c['slow']} dropped{slow}; {c['kept']} kept: "
+                f"{c['unreadable']} with unreadable frames, {slow}; {c['kept']} kept: "
                 f"{c['train']} training + {c['val']} validation ({self.split.kind.value} split{gap})")
 
 
@@ -68,7 +72,14 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     if len(usable) < 2:
         raise DataLogError(f"only {len(usable)} samples with readable frames"
                            f"{' at or above the minimum speed' if slow.any() else ''} in {dataset.logs}")
-    train, val = make_split(len(usable), seed, options.split)
+    # split the log as recorded, then drop what is unusable: blocks stay stretches of real time, and runs with
+    # other filters (or crops) of the same data hold out the same stretches
+    train, val = make_split(len(dataset.samples), seed, options.split)
+    keep = cache.valid & ~slow
+    train, val = train[keep[train]], val[keep[val]]
+    if not len(train) or not len(val):
+        raise DataLogError(f"{len(train)} training and {len(val)} validation samples left in {dataset.logs}: "
+                           "record more, or lower --min-speed")
     steering = np.array([s.steering for s in dataset.samples], np.float32)
     sides = np.array([s.has_sides for s in dataset.samples], bool) & pipeline.augment.uses_side_cameras
     if pipeline.augment.uses_side_cameras and not sides.any():
@@ -77,4 +88,4 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
               "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
               "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
               "gap": int(len(usable) - len(train) - len(val))}
-    return PreparedData(dataset, cache, usable, usable[train], usable[val], steering, sides, counts, options.split)
+    return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split)
