@@ -80,8 +80,12 @@ def write_preview(args: argparse.Namespace) -> int:
         a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{describe(params, k)}", fontsize=6.5)
         a_net.imshow(net, interpolation="nearest")
         a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=6.5)
+    a, c = pipeline.augment, pipeline.contract
+    bright = f"p + U(-{a.brightness_range:g}, {a.brightness_range:g})" if a.brightness_mode == "add" else \
+        f"p x (1 + U(-{a.brightness_range:g}, {a.brightness_range:g}))"
     fig.suptitle(f"{args.behavior} / {args.approach}: recorded label -> training label "
-                 f"(left: full-resolution reference, right: training input)", fontsize=9)
+                 f"(left: full-resolution reference, right: training input, rows {c.crop_top}-{c.crop_bottom}); "
+                 f"brightness {bright}", fontsize=9)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=110)

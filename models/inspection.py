@@ -46,13 +46,15 @@ def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
     return path
 
 
-def plot_loss(out: Path, history: list[dict[str, float]]) -> Path:
+def plot_loss(out: Path, history: list[dict[str, float]], exported_epoch: int | None = None) -> Path:
     import matplotlib.pyplot as plt
 
     epochs = [h["epoch"] for h in history]
     fig, ax = plt.subplots(figsize=(5.5, 3.5))
     ax.plot(epochs, [h["train_loss"] for h in history], "o-", label="training (augmented)")
     ax.plot(epochs, [h["val_loss"] for h in history], "s-", label="validation")
+    if exported_epoch:
+        ax.axvline(exported_epoch, color="0.4", ls=":", label=f"exported (epoch {exported_epoch})")
     ax.set_yscale("log")
     ax.set_xlabel("epoch")
     ax.set_ylabel("mean squared error of the steering")

@@ -103,7 +103,7 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
 
     log.info("%s", data.summary(config.data_options()))
     augmenter = FastAugmenter(data.cache, pipeline.augment)
-    tset = TrainingSet(data.train, data.steering[data.train], data.has_sides[data.train], pipeline.deletion_rate,
+    tset = TrainingSet(data.train, data.targets[data.train], data.has_sides[data.train], pipeline.deletion_rate,
                        config.batch_size)
     log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
              config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
+from drive_server.contract import ContractError
 from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipeline, pipeline_for
 from models.split import SplitSpec
 from models.trainingdata import DataOptions
@@ -42,6 +43,7 @@ class TrainConfig:
     min_speed: float = 0.0  # rows recorded slower than this are dropped (0: keep all)
     min_speed_unit: str = "mph"
     speed_unit: str = "mph"  # unit of the log's speed column: mph (Udacity) or kmh (the paper's simulator)
+    smooth_labels: int = 0  # train on a centred moving average of the steering over N frames (0: as recorded)
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -54,7 +56,14 @@ class TrainConfig:
             raise ValueError(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
         if self.min_speed < 0:
             raise ValueError(f"min speed must be >= 0, got {self.min_speed}")
+        if self.brightness_range is not None and self.brightness_range < 0:
+            raise ValueError(f"brightness range must be >= 0, got {self.brightness_range}")
         self.split_spec()  # validates the split settings
+        try:
+            self.pipeline()
+        except ContractError as exc:  # said in the flags' words, not as a broken model file
+            raise ValueError(f"--crop-top/--crop-bottom (with the {self.approach} approach's defaults for what is "
+                             f"not given): {exc}") from None
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
@@ -66,7 +75,7 @@ class TrainConfig:
         return SplitSpec(self.split, self.val_fraction, self.block_frames, self.gap_frames)
 
     def data_options(self) -> DataOptions:
-        return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit)
+        return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels)
 
     def pipeline(self) -> Pipeline:
         """The behavior's pipeline with this run's crop and brightness settings applied."""

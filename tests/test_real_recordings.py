@@ -149,3 +149,20 @@ def test_config_pipeline_carries_crop_and_brightness() -> None:
     assert (paper.contract.crop_top, paper.augment.brightness_range, paper.augment.brightness_mode) == (0, 100, "add")
     with pytest.raises(ValueError, match="crop"):
         TrainConfig(data=[], out="", crop_top=100, crop_bottom=90).pipeline()
+
+
+def test_smoothed_labels_train_but_never_score_and_never_leak() -> None:
+    from models.behavior import pipeline_for
+    from models.trainingdata import DataOptions, prepare_data
+
+    options = DataOptions(SplitSpec("blocks", block_frames=7, gap_frames=0), smooth_frames=5)
+    data = prepare_data([SAMPLE], pipeline_for("simplistic", "shallow", "ours"), 2, options, workers=1)
+    raw = data.steering.astype(np.float64)
+    assert not np.array_equal(data.targets, data.steering)  # the sample has taps to average
+    train = set(data.train.tolist())
+    for i in data.train:  # a training target averages training labels only, within +-2 frames
+        window = [j for j in range(i - 2, i + 3) if j in train]
+        assert data.targets[i] == pytest.approx(raw[window].mean(), abs=1e-6)
+    # the held-out labels themselves are untouched: validation scores what was recorded
+    assert np.array_equal(data.steering[data.val], np.array([s.steering for s in data.dataset.samples],
+                                                            np.float32)[data.val])

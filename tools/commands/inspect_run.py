@@ -43,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     written = [plot_histograms(out, data, pipeline, config.seed)]
     if (run_dir / runfiles.HISTORY).exists():
-        written.append(plot_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY)))
+        exported = record.get("result", {}).get("exported_epoch")
+        written.append(plot_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY), exported))
     model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
     checkpoint = run_dir / runfiles.CHECKPOINT
     if checkpoint.exists():

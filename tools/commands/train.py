@@ -38,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--speed-unit); 0 keeps every row")
     parser.add_argument("--speed-unit", choices=("mph", "kmh"), default=TrainConfig.speed_unit,
                         help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
+    parser.add_argument("--smooth-labels", type=int, default=TrainConfig.smooth_labels, metavar="N",
+                        help="fit a centred moving average of the steering over N frames (keyboard taps averaged "
+                             "to what the driver meant); validation still scores the recorded steering. 0: off")
     parser.add_argument("--max-steps-per-epoch", type=int, help="cap steps per epoch (quick runs)")
     parser.add_argument("--threads", type=int,
                         help="PyTorch threads (default: cores - 1 for the shallow CNN, whose batches need a core of "
@@ -60,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
                          batch_size=args.batch_size, seed=args.seed, max_steps_per_epoch=args.max_steps_per_epoch,
                          split=args.split, block_frames=args.block_frames, gap_frames=args.gap_frames,
                          export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
+                         smooth_labels=args.smooth_labels,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
     if "summary" in result.info:
