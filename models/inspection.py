@@ -104,7 +104,7 @@ def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: 
     ax.set_ylim(-1.05, 1.05)
     ax.set_xlabel(f"frame (log order, {first_log.name})")
     ax.set_ylabel("steering (-1..1 = ±25°)")
-    ax.set_title(f"{len(positions)} consecutive frames ({data.split.kind.value} split); on its {window['n']} "
+    ax.set_title(f"{len(positions)} frames in log order ({data.split.kind.value} split); on its {window['n']} "
                  f"validation frames only: MSE {window['mse']:.4f}, r {window['r']:.2f} "
                  f"(always 0: MSE {window['zero_mse']:.4f})", fontsize=10)
     ax.legend(fontsize=8, loc="upper right")
