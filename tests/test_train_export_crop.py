@@ -85,3 +85,27 @@ def test_crop_is_carried_through_the_contract_and_served_identically(tmp_path: P
     # and the crop matters: the same frames uncropped give other inputs
     full = build_cache(samples[:1], PreprocessContract(), ("center",), workers=1).frames[0]
     assert np.abs(full.astype(int) - trained_on[:1]).mean() > 5
+
+
+def test_inspect_scores_validation_frames_only_and_says_so(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    from models.metrics import steering_metrics
+    from models.trainingdata import prepare_data
+    from tools.cli import main
+
+    config = _config(tmp_path / "run", epochs=1, max_steps_per_epoch=2)
+    result = train(config)
+    capsys.readouterr()
+    assert main(["inspect", str(result.run_dir), "--frames", "20", "--samples", "1"]) == 0
+    out = capsys.readouterr().out
+    stored = TrainConfig.from_dict(json.loads((result.run_dir / "config.json").read_text())["config"])
+    data = prepare_data(stored.data, stored.pipeline(), stored.seed, stored.data_options(), workers=1)
+    window = data.usable[:20]
+    val = window[np.isin(window, data.val)]
+    assert 0 < len(val) < len(window)  # the plotted window holds training frames too: they must not count
+    x = to_input_tensor(data.cache.frames[0, val], stored.pipeline().contract)
+    expected = steering_metrics(_onnx_outputs(result.onnx, x).ravel(), data.steering[val])
+    line = next(ln for ln in out.splitlines() if ln.startswith("plotted window"))
+    assert "validation frames only (blocks split)" in line and f"({len(val)} frames)" in line
+    assert f"MSE {expected['mse']:.4f}" in line
+    assert "all validation frames, as rbc train reported them" in out
