@@ -57,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="server processes sharing the port (several simulators at once; WebSocket transport "
                         "only when > 1; POSIX only). Default 1")
     p.add_argument("--ping-interval", type=float, default=25.0, help="seconds between the server's pings (default 25)")
+    p.add_argument("--record", type=Path, default=None, metavar="DIR",
+                   help="save every answered frame and the command sent as a Udacity-format log in DIR "
+                        "(driving_log.csv + IMG/), written off the drive loop (like Udacity's drive.py FOLDER)")
     p.add_argument("--stock-transport", action="store_true",
                    help="disable the WebSocket transport tuning (for comparison benchmarks)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -91,6 +94,8 @@ def main(argv: list[str] | None = None) -> int:
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
         if args.workers < 1 or (args.workers > 1 and not hasattr(os, "fork")):
             raise ValueError(f"--workers must be >= 1 (and 1 where fork is unavailable), got {args.workers}")
+        if args.record is not None and args.workers > 1:
+            raise ValueError("--record works with one server process (--workers 1)")
         if args.ping_interval < 1:
             raise ValueError(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
     except ValueError as exc:
@@ -137,7 +142,15 @@ def main(argv: list[str] | None = None) -> int:
         server.bind()
     except OSError as exc:
         return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
-    server.serve()
+    if args.record is not None:
+        from drive_server.recorder import Recorder
+
+        server.recorder = Recorder(args.record)
+    try:
+        server.serve()
+    finally:
+        if server.recorder is not None:
+            server.recorder.close()
     return 0
 
 

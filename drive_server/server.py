@@ -138,6 +138,7 @@ class DriveServer:
         self._stop = False
         self._sock: Any = None
         self._logged_frames = -1
+        self.recorder: Any = None  # a drive_server.recorder.Recorder with --record: gets every answered frame
         self.sio.on("connect", self._on_connect)
         self.sio.on("disconnect", self._on_disconnect)
         self.sio.on("telemetry", self._on_telemetry)
@@ -197,7 +198,8 @@ class DriveServer:
             t_parse = perf_counter() - t0
             command, (decode, pre, infer, control) = self.pipeline.run(telemetry)
             t4 = perf_counter()
-            self._reply(client, "steer", encode_steer(client.guard.good(command)))
+            sent = client.guard.good(command)
+            self._reply(client, "steer", encode_steer(sent))
             t5 = perf_counter()
         except (ProtocolError, InferenceError) as exc:
             self._fallback(client, str(exc))
@@ -207,6 +209,8 @@ class DriveServer:
             self._fallback(client, f"internal error: {type(exc).__name__}")
             return
         client.stats.record((t_parse + decode, pre, infer, control + (t5 - t4), t5 - t0))
+        if self.recorder is not None:  # after the reply: recording never delays the simulator
+            self.recorder.record(telemetry.image_b64, sent, telemetry.speed)
 
     def _fallback(self, client: ClientState, reason: str) -> None:
         """Answer an unusable frame: hold the last good command for a few frames, then stop."""

@@ -36,7 +36,8 @@ class AugmentSpec:
     shadow_darkness: float = 0.65
     shadow_x: tuple[int, int] = (0, FRAME_WIDTH)
     shadow_y: tuple[int, int] = (FRAME_HEIGHT // 2, FRAME_HEIGHT)
-    brightness_range: float = 100.0
+    brightness_range: float = 100.0  # "add": grey levels; "scale": fraction of the frame's own values
+    brightness_mode: str = "add"  # "add": Eq. 6, p + beta (the paper); "scale": p * (1 + beta), for dark frames
     pan_range: float = 0.05  # fraction of width/height
     tilt_range_deg: float = 1.0
     shift_range_px: float = 0.0  # full-resolution pixels
@@ -151,9 +152,15 @@ def shadows(rgb: np.ndarray, quads: np.ndarray, darkness: float) -> np.ndarray:
     return np.rint(out).astype(np.uint8)
 
 
-def brightness(rgb: np.ndarray, beta: float) -> np.ndarray:
-    """Eq. 6: add ``beta`` to every pixel and clamp to 0..255."""
-    return np.rint(np.clip(rgb.astype(np.float32) + np.float32(beta), 0, 255)).astype(np.uint8)
+def brightness(rgb: np.ndarray, beta: float, mode: str = "add") -> np.ndarray:
+    """Eq. 6: add ``beta`` to every pixel and clamp to 0..255; ``mode="scale"``: multiply by 1 + beta.
+
+    Adding U(-100, 100) suits the bright simulator; on a dark frame (mean ~60) it blacks the frame
+    out, while a gain keeps its content whatever its brightness.
+    """
+    x = rgb.astype(np.float32)
+    x = x * np.float32(1.0 + beta) if mode == "scale" else x + np.float32(beta)
+    return np.rint(np.clip(x, 0, 255)).astype(np.uint8)
 
 
 def flip(rgb: np.ndarray, steering: float) -> tuple[np.ndarray, float]:
@@ -197,7 +204,7 @@ def augment_reference(frames: dict[str, np.ndarray], params: AugParams, i: int,
     if params.shadow[i]:
         img = shadows(img, params.shadow_xy[i], spec.shadow_darkness)
     if params.brightness[i]:
-        img = brightness(img, float(params.beta[i]))
+        img = brightness(img, float(params.beta[i]), spec.brightness_mode)
     if params.flip[i]:
         img, _ = flip(img, 0.0)
     if params.pan[i]:

@@ -11,7 +11,7 @@ import argparse
 import numpy as np
 
 from models.augment import AugParams, augment_reference, draw_params
-from models.behavior import pipeline_for
+from models.train_config import TrainConfig
 from protocol.facts import CAMERAS
 
 
@@ -23,7 +23,7 @@ def describe(params: AugParams, i: int) -> str:
     if params.shadow[i]:
         parts.append("shadow")
     if params.brightness[i]:
-        parts.append(f"bright{params.beta[i]:+.0f}")
+        parts.append(f"bright{params.beta[i]:+.2g}")
     if params.flip[i]:
         parts.append("flip")
     if params.pan[i]:
@@ -46,7 +46,9 @@ def write_preview(args: argparse.Namespace) -> int:
     from models.framecache import build_cache, load_frame
     from protocol.datalog import read_logs
 
-    pipeline = pipeline_for(args.behavior, args.arch, args.approach)
+    options = {k: getattr(args, k, None) for k in ("crop_top", "crop_bottom", "brightness_range")}
+    pipeline = TrainConfig(data=[], out="", behavior=args.behavior, arch=args.arch, approach=args.approach,
+                           brightness_mode=getattr(args, "brightness_mode", None) or "add", **options).pipeline()
     dataset = read_logs(args.data)
     rng = np.random.default_rng(args.seed)
     # prefer turning frames so the label corrections are visible, as the paper's figures do
@@ -78,8 +80,12 @@ def write_preview(args: argparse.Namespace) -> int:
         a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{describe(params, k)}", fontsize=6.5)
         a_net.imshow(net, interpolation="nearest")
         a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=6.5)
+    a, c = pipeline.augment, pipeline.contract
+    bright = f"p + U(-{a.brightness_range:g}, {a.brightness_range:g})" if a.brightness_mode == "add" else \
+        f"p x (1 + U(-{a.brightness_range:g}, {a.brightness_range:g}))"
     fig.suptitle(f"{args.behavior} / {args.approach}: recorded label -> training label "
-                 f"(left: full-resolution reference, right: training input)", fontsize=9)
+                 f"(left: full-resolution reference, right: training input, rows {c.crop_top}-{c.crop_bottom}); "
+                 f"brightness {bright}", fontsize=9)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=110)

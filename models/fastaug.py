@@ -137,13 +137,17 @@ class FastAugmenter:
                 out[i] = cv2.subtract(out[i], cv2.multiply(out[i], mask, scale=strength / 255.0))
 
     def _brightness(self, out: np.ndarray, params: AugParams) -> None:
-        """Eq. 6 as a per-image lookup table: clamp(p + round(beta)) (luma only for YUV)."""
+        """Eq. 6 as a per-image lookup table: clamp(p + round(beta)), or clamp(p * (1 + beta)) (luma only for YUV)."""
         which = np.flatnonzero(params.brightness)
         if not len(which):
             return
         ramp = np.arange(256, dtype=np.int32)
         betas = np.rint(params.beta[which]).astype(np.int32)
-        luts = np.clip(ramp[None, :] + betas[:, None], 0, 255).astype(np.uint8)
+        if self.spec.brightness_mode == "scale":
+            luts = np.clip(np.rint(ramp[None, :] * (1.0 + params.beta[which, None].astype(np.float64))), 0, 255)
+            luts = luts.astype(np.uint8)
+        else:
+            luts = np.clip(ramp[None, :] + betas[:, None], 0, 255).astype(np.uint8)
         for k, i in enumerate(which):
             lut = luts[k]
             if self._yuv:

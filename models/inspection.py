@@ -46,13 +46,15 @@ def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
     return path
 
 
-def plot_loss(out: Path, history: list[dict[str, float]]) -> Path:
+def plot_loss(out: Path, history: list[dict[str, float]], exported_epoch: int | None = None) -> Path:
     import matplotlib.pyplot as plt
 
     epochs = [h["epoch"] for h in history]
     fig, ax = plt.subplots(figsize=(5.5, 3.5))
     ax.plot(epochs, [h["train_loss"] for h in history], "o-", label="training (augmented)")
     ax.plot(epochs, [h["val_loss"] for h in history], "s-", label="validation")
+    if exported_epoch:
+        ax.axvline(exported_epoch, color="0.4", ls=":", label=f"exported (epoch {exported_epoch})")
     ax.set_yscale("log")
     ax.set_xlabel("epoch")
     ax.set_ylabel("mean squared error of the steering")
@@ -66,11 +68,12 @@ def plot_loss(out: Path, history: list[dict[str, float]]) -> Path:
     return path
 
 
-def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: int) -> tuple[Path, float]:
+def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: int) -> tuple[Path, dict]:
     import matplotlib.pyplot as plt
     import torch
 
     from drive_server.preprocess import to_input_tensor
+    from models.metrics import steering_metrics
 
     first_log = data.dataset.samples[0].log
     positions = [i for i in data.usable if data.dataset.samples[i].log == first_log][:frames]
@@ -91,24 +94,26 @@ def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: 
         with torch.no_grad():
             pred = model(torch.from_numpy(x)).numpy().ravel()
         source = "checkpoint (PyTorch)"
-    mse = float(np.mean((pred - truth) ** 2))
     is_val = np.isin(positions, data.val)
+    window = steering_metrics(pred[is_val], truth[is_val])  # training frames say nothing about generalisation
     fig, ax = plt.subplots(figsize=(12, 3.6))
     t = np.arange(len(positions))
     ax.plot(t, truth, color="0.5", lw=1.0, label="recorded (manual)")
     ax.plot(t, pred, color="tab:red", lw=1.2, label=f"predicted, {source}")
-    ax.scatter(t[is_val], truth[is_val], s=4, color="tab:blue", label="validation frames", zorder=3)
+    ax.scatter(t[is_val], truth[is_val], s=4, color="tab:blue", label="validation frames (held out)", zorder=3)
     ax.set_ylim(-1.05, 1.05)
     ax.set_xlabel(f"frame (log order, {first_log.name})")
     ax.set_ylabel("steering (-1..1 = ±25°)")
-    ax.set_title(f"prediction analysis over {len(positions)} consecutive frames: MSE {mse:.4f}", fontsize=10)
+    ax.set_title(f"{len(positions)} frames in log order ({data.split.kind.value} split); on its {window['n']} "
+                 f"validation frames only: MSE {window['mse']:.4f}, r {window['r']:.2f} "
+                 f"(always 0: MSE {window['zero_mse']:.4f})", fontsize=10)
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     path = out / "predictions.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return path, mse
+    return path, window
 
 
 def visual_backprop(activations: list) -> np.ndarray:

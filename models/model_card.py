@@ -19,6 +19,16 @@ def _approach(approach: str, resolved: dict) -> str:
             "the augmentations of Table 5)")
 
 
+def _validation(cfg: dict, history: list[dict]) -> str:
+    """The exported epoch's validation MSE and how it was measured (runs before issue 13: random split, last)."""
+    result = cfg.get("result")
+    if result is None:
+        return f"{history[-1]['val_loss']:.5f} (final epoch, random split)"
+    m = result["val_metrics"]
+    return (f"{result['val_mse']:.5f} (epoch {result['exported_epoch']}, export {result['export']}, "
+            f"{result['split']} split; Pearson r {m['r']:.2f}, always-0 MSE {m['zero_mse']:.5f})")
+
+
 def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name: str) -> str:
     cfg = json.loads((run_dir / CONFIG).read_text(encoding="utf-8"))
     history = read_history(run_dir / HISTORY)
@@ -39,7 +49,7 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
         f"| training | {c['arch']}, {r['epochs']} epochs x {r['steps_per_epoch']} steps of {c['batch_size']}, "
         f"augmentation loops {c['aug_loops']}, Adam {c['learning_rate']}, MSE, seed {c['seed']} |",
         f"| training time | {train_s / 60:.1f} min on a 2-core CPU |",
-        f"| validation MSE | {history[-1]['val_loss']:.5f} (final epoch) |",
+        f"| validation MSE | {_validation(cfg, history)} |",
         f"| preprocessing | {json.dumps(cfg['contract'])} (in the ONNX metadata) |",
         f"| closed loop, no variation | eta = {lap['eta']:.1f} % on `{sc['track']}`"
         + (f" with {sc['cones']} cones (seed {sc['cone_seed']})" if sc["cones"] else "")

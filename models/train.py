@@ -7,6 +7,7 @@ and returns; ``resume=True`` continues from it with the stored configuration, ba
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import math
@@ -14,11 +15,12 @@ import os
 import signal
 import threading
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import cv2
+import numpy as np
 import torch
 from torch import nn
 
@@ -26,21 +28,20 @@ from drive_server import runrecords
 from drive_server.preprocess import to_input_tensor
 from models import runfiles
 from models.batches import Prefetcher, TrainingSet, epoch_batches
-from models.behavior import Pipeline, pipeline_for
+from models.behavior import Pipeline
+from models.checkpoint import RunDirError, State, load_checkpoint, save_checkpoint
 from models.export import export_onnx
 from models.fastaug import FastAugmenter, training_contract
+from models.metrics import steering_metrics
 from models.nets import build_model, count_parameters
 from models.train_config import TrainConfig
+from models.train_record import config_record
 from models.trainingdata import PreparedData, prepare_data
 
 log = logging.getLogger(__name__)
 
 CHECKPOINT_EVERY_S = 120.0
 EXPORT_FRAMES = 32
-
-
-class RunDirError(RuntimeError):
-    """The run directory is in a state that does not fit the request (exists, or nothing to resume)."""
 
 
 @dataclass
@@ -55,14 +56,7 @@ class TrainResult:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-@dataclass
-class _State:
-    epoch: int = 0
-    step: int = 0
-    loss_sum: float = 0.0
-    loss_count: int = 0
-    epoch_seconds: float = 0.0
-    history: list[dict[str, float]] = field(default_factory=list)
+__all__ = ["RunDirError", "TrainConfig", "TrainResult", "train"]
 
 
 def steps_per_epoch(n_train: int, batch_size: int, loops: int) -> int:
@@ -85,7 +79,7 @@ def default_threads(arch: str = "shallow") -> int:
 def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     run_dir = Path(config.out)
     config = _resolve_config(config, run_dir, resume)
-    pipeline = pipeline_for(config.behavior, config.arch, config.approach)
+    pipeline = config.pipeline()
     epochs = config.epochs or pipeline.epochs
     torch.set_num_threads(config.threads or default_threads(config.arch))
     cv2.setNumThreads(1)
@@ -93,10 +87,10 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
 
     model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
-    state = _State()
+    state, best = State(), None
     checkpoint = run_dir / runfiles.CHECKPOINT
     if resume and checkpoint.exists():  # before decoding any frame: a bad checkpoint is reported at once
-        state = _load_checkpoint(checkpoint, model, optimizer)
+        state, best = load_checkpoint(checkpoint, model, optimizer)
         log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
     data = _prepare(config, pipeline)
     n_train, n_val = len(data.train), len(data.val)
@@ -104,10 +98,12 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     if config.max_steps_per_epoch:
         steps = min(steps, config.max_steps_per_epoch)
     if not (resume and checkpoint.exists()):
-        runrecords.write_json(run_dir / runfiles.CONFIG, _config_record(config, pipeline, data, epochs, steps))
+        runrecords.write_json(run_dir / runfiles.CONFIG, config_record(config, pipeline, data, epochs, steps,
+                                                                         validation_steps(n_val, config.batch_size)))
 
+    log.info("%s", data.summary(config.data_options()))
     augmenter = FastAugmenter(data.cache, pipeline.augment)
-    tset = TrainingSet(data.train, data.steering[data.train], data.has_sides[data.train], pipeline.deletion_rate,
+    tset = TrainingSet(data.train, data.targets[data.train], data.has_sides[data.train], pipeline.deletion_rate,
                        config.batch_size)
     log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
              config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,
@@ -116,7 +112,7 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     wall = time.perf_counter()
     with _StopFlag() as stop:
         while state.epoch < epochs:
-            done = _train_epoch(model, optimizer, augmenter, tset, config, state, steps, stop, checkpoint)
+            done = _train_epoch(model, optimizer, augmenter, tset, config, state, steps, stop, checkpoint, best)
             trained += done
             if stop.requested and state.step < steps:
                 log.warning("interrupted at epoch %d step %d: checkpoint saved; continue with --resume",
@@ -128,33 +124,41 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
                                   "val_loss": val_loss, "seconds": round(state.epoch_seconds, 2)})
             log.info("epoch %d/%d: train MSE %.5f, val MSE %.5f, %.0f s", state.epoch + 1, epochs,
                      state.history[-1]["train_loss"], val_loss, state.epoch_seconds)
+            if val_loss < state.best_val:  # strictly lower: ties keep the earlier epoch
+                best = copy.deepcopy(model.state_dict())
+                state.best_epoch, state.best_val = state.epoch + 1, val_loss
             state = replace(state, epoch=state.epoch + 1, step=0, loss_sum=0.0, loss_count=0, epoch_seconds=0.0)
             runfiles.write_history(run_dir / runfiles.HISTORY, state.history)
-            _save_checkpoint(checkpoint, model, optimizer, state, config)
+            save_checkpoint(checkpoint, model, optimizer, state, config, best)
             if stop.requested and state.epoch < epochs:
                 log.warning("interrupted after epoch %d: checkpoint saved; continue with --resume", state.epoch)
                 return TrainResult(run_dir, state.history, None, None, None, interrupted=True)
     rate = trained * config.batch_size / max(1e-9, time.perf_counter() - wall)
-    return _finish(model, data, pipeline, config, state, run_dir, rate)
+    return _finish(model, data, pipeline, config, state, run_dir, rate, best)
+
+
+def predict(model: nn.Module, data: PreparedData, pipeline: Pipeline, positions: np.ndarray,
+            batch_size: int = 256) -> np.ndarray:
+    """Steering predicted for the centre frames at ``positions`` (no augmentation), float32."""
+    model.eval()
+    contract = training_contract(pipeline.contract)
+    out = []
+    with torch.no_grad():
+        for start in range(0, len(positions), batch_size):
+            idx = positions[start:start + batch_size]
+            out.append(model(torch.from_numpy(to_input_tensor(data.cache.frames[0, idx], contract))).numpy().ravel())
+    return np.concatenate(out) if out else np.zeros(0, np.float32)
 
 
 def evaluate(model: nn.Module, data: PreparedData, pipeline: Pipeline, batch_size: int) -> float:
     """Validation MSE over every validation sample (centre frames, no augmentation)."""
-    model.eval()
-    contract = training_contract(pipeline.contract)
-    total, count = 0.0, 0
-    with torch.no_grad():
-        for start in range(0, len(data.val), batch_size):
-            idx = data.val[start:start + batch_size]
-            x = torch.from_numpy(to_input_tensor(data.cache.frames[0, idx], contract))
-            y = torch.from_numpy(data.steering[idx]).reshape(-1, 1)
-            total += float(nn.functional.mse_loss(model(x), y, reduction="sum"))
-            count += len(idx)
-    return total / max(1, count)
+    pred = predict(model, data, pipeline, data.val, batch_size).astype(np.float64)
+    return float(np.mean((pred - data.steering[data.val]) ** 2)) if len(pred) else 0.0
 
 
 def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: FastAugmenter, tset: TrainingSet,
-                 config: TrainConfig, state: _State, steps: int, stop: _StopFlag, checkpoint: Path) -> int:
+                 config: TrainConfig, state: State, steps: int, stop: _StopFlag, checkpoint: Path,
+                 best: dict | None) -> int:
     """Train from ``state.step`` to the end of the epoch (or a Ctrl-C); returns the steps done."""
     from tqdm import tqdm
 
@@ -183,7 +187,7 @@ def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: 
             bar.update(1)
             if stop.requested or time.perf_counter() - last_save > CHECKPOINT_EVERY_S:
                 state.epoch_seconds = time.perf_counter() - started
-                _save_checkpoint(checkpoint, model, optimizer, state, config)
+                save_checkpoint(checkpoint, model, optimizer, state, config, best)
                 last_save = time.perf_counter()
                 if stop.requested:
                     break
@@ -194,16 +198,31 @@ def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: 
     return done
 
 
-def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: TrainConfig, state: _State,
-            run_dir: Path, rate: float) -> TrainResult:
-    val_loss = state.history[-1]["val_loss"] if state.history else float("nan")
+def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: TrainConfig, state: State,
+            run_dir: Path, rate: float, best: dict | None) -> TrainResult:
+    """Export the best epoch (or the last), score it on the held-out frames, record what was exported."""
+    last_val = state.history[-1]["val_loss"] if state.history else float("nan")
+    exported_epoch = len(state.history)
+    if config.export == "best" and best is not None and state.best_epoch:
+        model.load_state_dict(best)
+        exported_epoch = state.best_epoch
+    metrics = steering_metrics(predict(model, data, pipeline, data.val, config.batch_size), data.steering[data.val])
+    val_loss = state.history[exported_epoch - 1]["val_loss"] if state.history else float("nan")
     info = {"arch": config.arch, "behavior": config.behavior, "approach": config.approach, "val_mse": val_loss,
             "epochs": len(state.history), "train_samples": int(len(data.train)), "seed": config.seed,
-            "parameters": count_parameters(model), "code_version": runrecords.code_version()}
+            "parameters": count_parameters(model), "code_version": runrecords.code_version(),
+            "split": config.split, "export": config.export, "exported_epoch": exported_epoch,
+            "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"]}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = run_dir / runfiles.MODEL
     diff = export_onnx(model.eval(), pipeline.contract, info, path, frames)
-    return TrainResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate, info=info)
+    record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
+    record["result"] = {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
+                        "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,
+                        "rows": data.counts, "onnx_max_diff": diff}
+    runrecords.write_json(run_dir / runfiles.CONFIG, record)
+    return TrainResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate,
+                       info={**info, "metrics": metrics, "summary": data.summary(config.data_options())})
 
 
 def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
@@ -216,7 +235,7 @@ def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
             bar.total = total
             bar.update(done - bar.n)
 
-        return prepare_data(config.data, pipeline, config.seed, config.val_fraction, workers, progress)
+        return prepare_data(config.data, pipeline, config.seed, config.data_options(), workers, progress)
 
 
 def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool) -> TrainConfig:
@@ -232,48 +251,6 @@ def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool) -> TrainCo
     if not config.data:
         raise RunDirError("no --data given")
     return replace(config, data=[str(Path(d).resolve()) for d in config.data])
-
-
-def _config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, epochs: int,
-                   steps: int) -> dict[str, Any]:
-    return {
-        "config": asdict(config),
-        "resolved": {
-            "epochs": epochs, "steps_per_epoch": steps,
-            "validation_steps": validation_steps(len(data.val), config.batch_size),
-            "deletion_rate": pipeline.deletion_rate, "optimizer": "Adam", "loss": "MSE",
-            "train_samples": int(len(data.train)), "val_samples": int(len(data.val)),
-            "zero_steer_train_samples": int((data.steering[data.train] == 0).sum()),
-        },
-        "augment": asdict(pipeline.augment),
-        "contract": asdict(pipeline.contract),
-        "logs": [{"path": str(r.log), "rows": r.rows, "samples": r.used, "skipped": len(r.skipped)}
-                 for r in data.dataset.reports],
-        "unreadable_frames": len(data.cache.errors),
-        "code_version": runrecords.code_version(),
-        "torch": torch.__version__,
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
-
-
-def _save_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer, state: _State,
-                     config: TrainConfig) -> None:
-    payload = {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "state": asdict(state),
-               "torch_rng": torch.get_rng_state(), "config": asdict(config)}
-    runrecords.write_bytes(path, lambda tmp: torch.save(payload, tmp))
-
-
-def _load_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer) -> _State:
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=False)
-        model.load_state_dict(payload["model"])
-        optimizer.load_state_dict(payload["optimizer"])
-        torch.set_rng_state(payload["torch_rng"])
-        return _State(**payload["state"])
-    except Exception as exc:  # a truncated, foreign or corrupt file: whatever torch raises for it
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RunDirError(f"{path}: not a readable checkpoint of this run ({first[:120]}); delete it and "
-                          f"{runfiles.CONFIG} to train again from the start") from None
 
 
 class _StopFlag:

@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
-from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE
+from drive_server.contract import ContractError
+from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipeline, pipeline_for
+from models.split import SplitSpec
+from models.trainingdata import DataOptions
+
+#: Brightness range of ``brightness_mode="scale"`` when none is given: gain 1 +- 0.5.
+SCALE_BRIGHTNESS_RANGE = 0.5
+#: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
+LEGACY = {"split": "random", "export": "last"}
 
 
 @dataclass
 class TrainConfig:
-    """Everything that determines a run. ``None`` means the paper's value for the behavior."""
+    """Everything that determines a run. ``None`` means the paper's (or the approach's) value."""
 
     data: list[str]
     out: str
@@ -23,13 +31,59 @@ class TrainConfig:
     learning_rate: float = LEARNING_RATE
     seed: int = 0
     max_steps_per_epoch: int | None = None
-    val_fraction: float = 0.2
+    val_fraction: float = SplitSpec.val_fraction
+    split: str = SplitSpec.kind.value  # "blocks": contiguous stretches held out; "random": the paper's
+    block_frames: int = SplitSpec.block_frames
+    gap_frames: int = SplitSpec.gap_frames
+    export: str = "best"  # "best": the epoch with the lowest validation MSE; "last": the final epoch
+    crop_top: int | None = None  # rows of the 320x160 frame; None: the approach's (0 ours, 60 nvidia)
+    crop_bottom: int | None = None
+    brightness_mode: str = "add"  # "add": the paper's p + beta; "scale": p * (1 + beta), relative to the frame
+    brightness_range: float | None = None  # None: 100 (add, the paper's), 50 (nvidia), 0.5 (scale)
+    min_speed: float = 0.0  # rows recorded slower than this are dropped (0: keep all)
+    min_speed_unit: str = "mph"
+    speed_unit: str = "mph"  # unit of the log's speed column: mph (Udacity) or kmh (the paper's simulator)
+    smooth_labels: int = 0  # train on a centred moving average of the steering over N frames (0: as recorded)
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
     progress: bool = True
 
+    def __post_init__(self) -> None:
+        if self.export not in ("best", "last"):
+            raise ValueError(f"export must be best or last, not {self.export!r}")
+        if self.brightness_mode not in ("add", "scale"):
+            raise ValueError(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
+        if self.min_speed < 0:
+            raise ValueError(f"min speed must be >= 0, got {self.min_speed}")
+        if self.brightness_range is not None and self.brightness_range < 0:
+            raise ValueError(f"brightness range must be >= 0, got {self.brightness_range}")
+        self.split_spec()  # validates the split settings
+        try:
+            self.pipeline()
+        except ContractError as exc:  # said in the flags' words, not as a broken model file
+            raise ValueError(f"--crop-top/--crop-bottom (with the {self.approach} approach's defaults for what is "
+                             f"not given): {exc}") from None
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         known = set(cls.__dataclass_fields__)
-        return cls(**{k: v for k, v in data.items() if k in known})
+        values = {**LEGACY, **{k: v for k, v in data.items() if k in known}}
+        return cls(**values)
+
+    def split_spec(self) -> SplitSpec:
+        return SplitSpec(self.split, self.val_fraction, self.block_frames, self.gap_frames)
+
+    def data_options(self) -> DataOptions:
+        return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels)
+
+    def pipeline(self) -> Pipeline:
+        """The behavior's pipeline with this run's crop and brightness settings applied."""
+        p = pipeline_for(self.behavior, self.arch, self.approach)
+        contract = replace(p.contract, crop_top=p.contract.crop_top if self.crop_top is None else self.crop_top,
+                           crop_bottom=p.contract.crop_bottom if self.crop_bottom is None else self.crop_bottom)
+        brightness_range = self.brightness_range
+        if brightness_range is None:
+            brightness_range = SCALE_BRIGHTNESS_RANGE if self.brightness_mode == "scale" else p.augment.brightness_range
+        augment = replace(p.augment, brightness_mode=self.brightness_mode, brightness_range=brightness_range)
+        return replace(p, contract=contract, augment=augment)

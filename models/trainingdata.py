@@ -1,44 +1,122 @@
-"""Logs -> decoded frames -> seeded train/validation split: what training, benchmarks and inspection share."""
+"""Logs -> decoded frames -> speed filter -> seeded train/validation split: what training, benchmarks and
+inspection share, so inspection sees exactly the split training used."""
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from models.behavior import Pipeline
 from models.framecache import FrameCache, build_cache
-from models.split import split_indices
+from models.split import SplitKind, SplitSpec, make_split
 from protocol.datalog import DataLogError, DataSet, read_logs
+from protocol.units import SpeedUnit, to_kmh
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DataOptions:
+    """Which rows are used and how they are split. The paper's defaults: every row, random split."""
+
+    split: SplitSpec = field(default_factory=lambda: SplitSpec(SplitKind.RANDOM))
+    min_speed: float = 0.0  # rows recorded below this speed are dropped (0: none)
+    min_speed_unit: SpeedUnit | str = SpeedUnit.MPH
+    speed_unit: SpeedUnit | str = SpeedUnit.MPH  # unit of the log's speed column
+    smooth_frames: int = 0  # training labels: centred moving average over this many frames (0: as recorded)
+
+    def slow(self, speeds: np.ndarray) -> np.ndarray:
+        """Rows slower than ``min_speed``, comparing both speeds in km/h."""
+        if self.min_speed <= 0:
+            return np.zeros(len(speeds), dtype=bool)
+        return to_kmh(np.asarray(speeds, np.float64), self.speed_unit) < to_kmh(self.min_speed, self.min_speed_unit)
 
 
 @dataclass
 class PreparedData:
     dataset: DataSet
     cache: FrameCache
-    usable: np.ndarray  # positions of samples whose frames all decoded
+    usable: np.ndarray  # positions of samples whose frames all decoded and that passed the speed filter
     train: np.ndarray  # cache positions of training samples (log order)
     val: np.ndarray  # cache positions of validation samples (log order)
     steering: np.ndarray  # float32, every sample
     has_sides: np.ndarray  # bool, every sample (False when the pipeline uses no side cameras)
+    counts: dict[str, int] = field(default_factory=dict)
+    split: SplitSpec = field(default_factory=SplitSpec)
+    labels: np.ndarray | None = None  # training targets (smoothed steering), every sample; None: ``steering``
+
+    @property
+    def targets(self) -> np.ndarray:
+        """What the network is fitted to; validation is always scored against the recorded ``steering``."""
+        return self.steering if self.labels is None else self.labels
+
+    def summary(self, options: DataOptions | None = None) -> str:
+        """One line: rows read, skipped, dropped and kept, and how the kept ones were split."""
+        c = self.counts
+        if options is None or options.min_speed > 0:
+            unit = f" {SpeedUnit(options.min_speed_unit).value}" if options else ""
+            slow = f"{c['slow']} dropped below {options.min_speed if options else 0:g}{unit}"
+        else:
+            slow = "no speed filter"
+        gap = f", {c['gap']} dropped beside held-out blocks" if c.get("gap") else ""
+        return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images), "
+                f"{c['unreadable']} with unreadable frames, {slow}; {c['kept']} kept: "
+                f"{c['train']} training + {c['val']} validation ({self.split.kind.value} split{gap})")
 
 
-def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, val_fraction: float = 0.2,
+def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, options: DataOptions = DataOptions(),
                  workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
     dataset = read_logs(data)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
+    speeds = np.array([s.speed for s in dataset.samples], np.float64)
+    slow = options.slow(speeds)
     cache = build_cache(dataset.samples, pipeline.contract, cameras, workers=workers, progress=progress)
-    usable = np.flatnonzero(cache.valid)
+    usable = np.flatnonzero(cache.valid & ~slow)
     if len(usable) < 2:
-        raise DataLogError(f"only {len(usable)} samples with readable frames in {dataset.logs}")
-    train, val = split_indices(len(usable), seed, val_fraction)
+        raise DataLogError(f"only {len(usable)} samples with readable frames"
+                           f"{' at or above the minimum speed' if slow.any() else ''} in {dataset.logs}")
+    # split the log as recorded, then drop what is unusable: blocks stay stretches of real time, and runs with
+    # other filters (or crops) of the same data hold out the same stretches
+    train, val = make_split(len(dataset.samples), seed, options.split)
+    keep = cache.valid & ~slow
+    train, val = train[keep[train]], val[keep[val]]
+    if not len(train) or not len(val):
+        raise DataLogError(f"{len(train)} training and {len(val)} validation samples left in {dataset.logs}: "
+                           "record more, or lower --min-speed")
     steering = np.array([s.steering for s in dataset.samples], np.float32)
     sides = np.array([s.has_sides for s in dataset.samples], bool) & pipeline.augment.uses_side_cameras
     if pipeline.augment.uses_side_cameras and not sides.any():
         log.warning("no sample has left and right frames: perspective shifts are skipped")
-    return PreparedData(dataset, cache, usable, usable[train], usable[val], steering, sides)
+    counts = {"rows": sum(r.rows for r in dataset.reports), "skipped": sum(len(r.skipped) for r in dataset.reports),
+              "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
+              "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
+              "gap": int(len(usable) - len(train) - len(val))}
+    labels = None
+    if options.smooth_frames > 1:
+        labels = smooth_labels(dataset, steering, options.smooth_frames, np.isin(np.arange(len(steering)), train))
+    return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels)
+
+
+def smooth_labels(dataset: DataSet, steering: np.ndarray, frames: int, use: np.ndarray) -> np.ndarray:
+    """Centred moving average of the steering within each log, over the frames marked in ``use`` only
+    (training frames: a held-out label never leaks into a training target).
+
+    Keyboard steering is a train of taps (~70 % exact zeros): the same road gets 0 in one frame and
+    -0.3 in the next. Its average over ~1 s is what the driver meant, and the best a single frame can
+    predict; fitting it lowers the error against the taps themselves.
+    """
+    out = np.empty_like(steering)
+    kernel = np.ones(frames, np.float64)
+    logs = np.array([str(s.log) for s in dataset.samples])
+    for name in dict.fromkeys(logs):
+        idx = np.flatnonzero(logs == name)
+        weight = use[idx].astype(np.float64)
+        total = np.convolve(steering[idx] * weight, kernel, mode="same")
+        count = np.convolve(weight, kernel, mode="same")
+        out[idx] = np.where(count > 0, total / np.maximum(count, 1e-9), steering[idx]).astype(np.float32)
+    out[np.abs(out) < 1e-6] = 0.0  # straight stretches stay exactly zero for the zero-steer balancing
+    return out

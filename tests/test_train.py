@@ -21,6 +21,7 @@ from drive_server.contract import (  # noqa: E402
 )
 from drive_server.preprocess import preprocess, to_input_tensor  # noqa: E402
 from models import train as train_mod  # noqa: E402
+from models.checkpoint import exported_weights  # noqa: E402
 from models.framecache import build_cache, load_frame  # noqa: E402
 from models.nets import ContractInput, build_model  # noqa: E402
 from models.train import RunDirError, TrainConfig, steps_per_epoch, train  # noqa: E402
@@ -54,14 +55,21 @@ def test_run_directory_contents(run) -> None:
     assert record["config"]["seed"] == 11 and record["config"]["batch_size"] == 256
     assert record["config"]["learning_rate"] == 1e-3 and record["config"]["aug_loops"] == 64
     assert record["resolved"]["deletion_rate"] == 0.7 and record["resolved"]["train_samples"] == 28
-    assert record["resolved"]["val_samples"] == 8 and record["resolved"]["steps_per_epoch"] == 3
+    # the default split holds out contiguous blocks: 7 of 36 frames, 1 training frame dropped beside them
+    assert record["resolved"]["val_samples"] == 7 and record["resolved"]["steps_per_epoch"] == 3
+    assert record["config"]["split"] == "blocks" and record["resolved"]["split"]["kind"] == "blocks"
+    assert record["config"]["export"] == "best" and record["result"]["export"] == "best"
+    assert record["rows"] == {"rows": 36, "skipped": 0, "unreadable": 0, "slow": 0, "kept": 36, "train": 28,
+                              "val": 7, "gap": 1}
     assert record["logs"] == [{"path": str((SAMPLE / "driving_log.csv").resolve()), "rows": 36, "samples": 36,
                                "skipped": 0}]
     assert record["augment"]["perspective"] == 0.5 and record["contract"]["width"] == 64
     assert record["code_version"]
     rows = list(csv.DictReader((d / "history.csv").open()))
     assert [r["epoch"] for r in rows] == ["1", "2"] and set(rows[0]) == {"epoch", "train_loss", "val_loss", "seconds"}
-    assert run.val_loss == pytest.approx(float(rows[-1]["val_loss"]))
+    best = min(range(2), key=lambda i: float(rows[i]["val_loss"]))
+    assert run.val_loss == pytest.approx(float(rows[best]["val_loss"]))
+    assert record["result"]["exported_epoch"] == best + 1
     assert not list(d.glob(".*.tmp"))
 
 
@@ -79,7 +87,7 @@ def test_onnx_export_carries_the_contract_and_matches_pytorch(run) -> None:
     images = build_cache(samples, PAPER_CONTRACT, ("center",), workers=1).frames[0]
     x = to_input_tensor(images, PAPER_CONTRACT)
     net = build_model("shallow", 64, 64)
-    net.load_state_dict(torch.load(run.run_dir / "checkpoint.pt", weights_only=False)["model"])
+    net.load_state_dict(exported_weights(run.run_dir / "checkpoint.pt"))
     with torch.no_grad():
         expected = ContractInput(net, "nhwc").eval()(torch.from_numpy(x)).numpy()
     got = session.run(None, {inp.name: x})[0]

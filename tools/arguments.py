@@ -25,3 +25,42 @@ def add_speed_unit_argument(parser: argparse.ArgumentParser, default: str, what:
     parser.add_argument("--speed-unit", "--telemetry-speed-unit", dest="speed_unit",
                         choices=[u.value for u in SpeedUnit], default=default,
                         help=f"unit of {what}: mph like the stock Udacity simulator, or kmh like the paper's")
+
+
+#: A documented region of interest for real Unity recordings with the car's bonnet in view: rows 64..136 of
+#: the 320x160 frame drop the sky and far scenery above and the bonnet (from row ~137 down) below.
+BONNET_CROP = (64, 136)
+
+
+def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
+    """Crop (carried in the model's contract) and brightness-augmentation strength, for train and previews."""
+    from models.train_config import SCALE_BRIGHTNESS_RANGE, TrainConfig
+
+    parser.add_argument("--crop-top", type=int, default=TrainConfig.crop_top, metavar="ROW",
+                        help="first row of the 320x160 frame the network sees (default: the approach's, 0 for ours, "
+                             f"60 for nvidia; real Unity recordings with the bonnet in view: {BONNET_CROP[0]})")
+    parser.add_argument("--crop-bottom", type=int, default=TrainConfig.crop_bottom, metavar="ROW",
+                        help="row after the last one the network sees (default: the approach's, 160; with the "
+                             f"bonnet in view: {BONNET_CROP[1]})")
+    parser.add_argument("--brightness-mode", choices=("add", "scale"), default=TrainConfig.brightness_mode,
+                        help="add: the paper's p + beta (grey levels); scale: p * (1 + beta), relative to the frame's "
+                             "own brightness, so dark frames are not blacked out")
+    parser.add_argument("--brightness-range", type=float, default=TrainConfig.brightness_range, metavar="R",
+                        help="beta ~ U(-R, R) (default: 100 grey levels for add, as in the paper; 50 for nvidia; "
+                             f"{SCALE_BRIGHTNESS_RANGE} for scale)")
+
+
+def preprocess_options(args: argparse.Namespace) -> dict:
+    """The ``TrainConfig`` fields set by :func:`add_preprocess_arguments`."""
+    return {k: getattr(args, k) for k in ("crop_top", "crop_bottom", "brightness_mode", "brightness_range")}
+
+
+def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
+    """``"5mph"``, ``"8 kmh"``, ``"8km/h"`` or a bare number (in ``default_unit``) -> (value, unit)."""
+    import re
+
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*(mph|kmh|km/h)?\s*", str(text).lower())
+    if not m:
+        raise ValueError(f"--min-speed {text!r}: give a number with an optional unit, e.g. 5mph or 8kmh")
+    unit = (m.group(2) or default_unit).replace("km/h", "kmh")
+    return float(m.group(1)), unit

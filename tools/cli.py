@@ -46,6 +46,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
     Subcommand("eval", "tools.commands.eval", "run the paper's robustness experiments on a model (Table 9)"),
     Subcommand("compare", "tools.commands.compare", "side-by-side comparison of models (Table 10)"),
     Subcommand("bench", "tools.commands.bench", "round-trip latency benchmark of drive_server over the Unity wire"),
+    Subcommand("video", "tools.commands.video",
+               "a browser-playable video of a recording (drive_server --record, rbc collect, Unity)"),
     Subcommand("replay", "tools.commands.replay",
                "replay a driving log to a drive server as the Unity simulator would"),
     Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),

@@ -144,6 +144,8 @@ def bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir:
         server_args = ["--log-every", "0", "--threads", str(args.threads), "--workers", str(args.workers)]
         if args.stock_transport:
             server_args.append("--stock-transport")
+        if getattr(args, "record", None) is not None:
+            server_args += ["--record", str(args.record)]
         server = ServerProcess(model, server_args, stats_json=stats_path)
         server.start()
         try:

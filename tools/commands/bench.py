@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads of the started server")
     p.add_argument("--workers", type=int, default=1, help="worker processes of the started server (default 1)")
     p.add_argument("--stock-transport", action="store_true", help="start the server without transport tuning")
+    p.add_argument("--record", type=Path, default=None, metavar="DIR",
+                   help="start the server with --record DIR (what recording costs the round trip)")
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
 
 

@@ -25,9 +25,8 @@ def run(args: argparse.Namespace) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
-    import torch
-
-    from models.behavior import pipeline_for
+    from models.checkpoint import exported_weights
+    from models.metrics import format_metrics
     from models.nets import build_model
     from models.train import TrainConfig
     from models.trainingdata import prepare_data
@@ -38,22 +37,25 @@ def run(args: argparse.Namespace) -> int:
                            "give the --out folder of an rbc train run")
     record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
     config = TrainConfig.from_dict(record["config"])
-    pipeline = pipeline_for(config.behavior, config.arch, config.approach)
-    data = prepare_data(args.data or config.data, pipeline, config.seed, config.val_fraction)
+    pipeline = config.pipeline()  # with the run's crop: the frames the model was trained on
+    data = prepare_data(args.data or config.data, pipeline, config.seed, config.data_options())
     out = run_dir / "inspect"
     out.mkdir(parents=True, exist_ok=True)
     written = [plot_histograms(out, data, pipeline, config.seed)]
     if (run_dir / runfiles.HISTORY).exists():
-        written.append(plot_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY)))
+        exported = record.get("result", {}).get("exported_epoch")
+        written.append(plot_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY), exported))
     model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
     checkpoint = run_dir / runfiles.CHECKPOINT
     if checkpoint.exists():
-        model.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["model"])
+        model.load_state_dict(exported_weights(checkpoint, config.export))
     model.eval()
-    path, mse = plot_predictions(out, data, pipeline, model, run_dir / runfiles.MODEL, args.frames)
+    path, window = plot_predictions(out, data, pipeline, model, run_dir / runfiles.MODEL, args.frames)
     written.append(path)
     written.append(plot_activations(out, data, pipeline, model, args.samples, config.seed))
     for p in written:
         print(p)
-    print(f"prediction MSE over the plotted frames: {mse:.5f}")
+    print(f"plotted window, its validation frames only ({config.split} split): {format_metrics(window)}")
+    if "result" in record:
+        print(f"all validation frames, as rbc train reported them: {format_metrics(record['result']['val_metrics'])}")
     return 0

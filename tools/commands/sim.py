@@ -58,7 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strip", type=Path, default=None, metavar="IMAGE",
                    help="grid of camera frames with steering, throttle, speed and take-overs (.jpg or .png)")
     p.add_argument("--strip-every", type=float, default=8.0, metavar="S", help="strip: one frame every S seconds")
-    p.add_argument("--video", type=Path, default=None, metavar="MP4", help="annotated camera video (mp4v)")
+    p.add_argument("--video", type=Path, default=None, metavar="MP4",
+                   help="annotated camera video (H.264 with the video extra, else mp4v)")
 
 
 def _driver(args: argparse.Namespace):
@@ -137,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     if strip is not None and strip.frames:
         print(f"strip {strip.write(args.strip)}")
     if video is not None and video.frames:
-        print(f"video {args.video} ({video.frames} frames)")
+        print(f"video {args.video} ({video.frames} frames, {video.backend})")
     if result.interrupted:
         return 130
     return 0

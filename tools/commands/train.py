@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from models.train_config import TrainConfig
-from tools.arguments import add_pipeline_arguments
+from tools.arguments import add_pipeline_arguments, add_preprocess_arguments, parse_speed
 from tools.errors import CommandError
 
 
@@ -21,6 +21,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-size", type=int, default=TrainConfig.batch_size, help="default %(default)s")
     parser.add_argument("--seed", type=int, default=TrainConfig.seed, help="split, balancing, augmentation and "
                         "initialisation seed (default %(default)s)")
+    parser.add_argument("--split", choices=("blocks", "random"), default=TrainConfig.split,
+                        help="blocks: hold out contiguous stretches of the log (what a new road looks like); "
+                             "random: hold out random frames, the paper's setting, optimistic at 9-15 Hz because "
+                             "neighbouring frames are near-copies (the bundled models were trained with random)")
+    parser.add_argument("--block-frames", type=int, default=TrainConfig.block_frames,
+                        help="frames per held-out block with --split blocks (shortened for logs under 5 blocks)")
+    parser.add_argument("--gap-frames", type=int, default=TrainConfig.gap_frames,
+                        help="training frames dropped on each side of a held-out block (at most a quarter block)")
+    parser.add_argument("--export", choices=("best", "last"), default=TrainConfig.export,
+                        help="which epoch becomes model.onnx: the one with the lowest validation MSE, or the last "
+                             "(the bundled models: last)")
+    add_preprocess_arguments(parser)
+    parser.add_argument("--min-speed", type=str, default=str(TrainConfig.min_speed), metavar="SPEED",
+                        help="drop rows recorded slower than this, e.g. 5mph or 8kmh (a bare number is in "
+                             "--speed-unit); 0 keeps every row")
+    parser.add_argument("--speed-unit", choices=("mph", "kmh"), default=TrainConfig.speed_unit,
+                        help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
+    parser.add_argument("--smooth-labels", type=int, default=TrainConfig.smooth_labels, metavar="N",
+                        help="fit a centred moving average of the steering over N frames (keyboard taps averaged "
+                             "to what the driver meant); validation still scores the recorded steering. 0: off")
     parser.add_argument("--max-steps-per-epoch", type=int, help="cap steps per epoch (quick runs)")
     parser.add_argument("--threads", type=int,
                         help="PyTorch threads (default: cores - 1 for the shallow CNN, whose batches need a core of "
@@ -31,21 +51,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from models.metrics import format_metrics
     from models.train import train
+    from tools.arguments import preprocess_options
 
     if not args.data and not args.resume:
         raise CommandError("no training data", "give at least one --data DIR (a folder rbc collect wrote)")
+    min_speed, min_unit = parse_speed(args.min_speed, args.speed_unit)
     config = TrainConfig(data=args.data, out=args.out, behavior=args.behavior, arch=args.arch,
                          approach=args.approach, epochs=args.epochs, aug_loops=args.aug_loops,
                          batch_size=args.batch_size, seed=args.seed, max_steps_per_epoch=args.max_steps_per_epoch,
-                         threads=args.threads, progress=not args.no_progress)
+                         split=args.split, block_frames=args.block_frames, gap_frames=args.gap_frames,
+                         export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
+                         smooth_labels=args.smooth_labels,
+                         threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
+    if "summary" in result.info:
+        print(result.info["summary"])
     for row in result.history:
         print(f"epoch {row['epoch']}: train MSE {row['train_loss']:.5f}  val MSE {row['val_loss']:.5f}  "
               f"{row['seconds']:.0f} s")
     if result.interrupted:
         print(f"interrupted; checkpoint in {result.run_dir}; continue with: rbc train --out {result.run_dir} --resume")
         return 130
+    info = result.info
+    print(f"exported epoch {info['exported_epoch']} ({info['export']}); held-out frames ({info['split']} split): "
+          f"{format_metrics(info['metrics'])}")
     print(f"model: {result.onnx} (val MSE {result.val_loss:.5f}; ONNX Runtime matches PyTorch to "
           f"{result.export_diff:.1e}); {result.samples_per_s:.0f} training samples/s")
     return 0

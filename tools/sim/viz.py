@@ -1,4 +1,4 @@
-"""Pictures of a run with OpenCV only: a top-down trajectory map, a strip of camera frames, an mp4.
+"""Pictures of a run: a top-down trajectory map, a strip of camera frames, an H.264 video.
 
 The map shows where the car went, coloured by cross-track error, with every intervention marked
 and listed, so a failed run can be understood at a glance; the strip and video show what the
@@ -270,26 +270,22 @@ class StripCollector:
 
 
 class VideoRecorder:
-    """Writes every telemetry frame, annotated, to an mp4 (OpenCV's ``mp4v`` codec)."""
+    """Writes every telemetry frame, annotated, to a browser-playable H.264 mp4 (see :mod:`tools.sim.video`)."""
 
     def __init__(self, path: str | Path, fps: float) -> None:
+        from tools.sim.video import VideoWriter
+
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.fps = fps
-        self._writer: cv2.VideoWriter | None = None
-        self.frames = 0
+        self._writer = VideoWriter(self.path, fps)
+        self.backend = self._writer.backend
+
+    @property
+    def frames(self) -> int:
+        return self._writer.frames
 
     def __call__(self, event: FrameEvent) -> None:
-        frame = annotate(event)
-        if self._writer is None:
-            h, w = frame.shape[:2]
-            self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
-            if not self._writer.isOpened():
-                raise OSError(f"OpenCV cannot write mp4 video to {self.path} (no mp4v encoder in this build)")
-        self._writer.write(frame)
-        self.frames += 1
+        self._writer.write(annotate(event))
 
     def close(self) -> None:
-        if self._writer is not None:
-            self._writer.release()
-            self._writer = None
+        self._writer.close()

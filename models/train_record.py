@@ -1,0 +1,38 @@
+"""What ``config.json`` records about a run before it trains: configuration, resolved schedule, data, code."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+from typing import Any
+
+import torch
+
+from drive_server import runrecords
+from models.behavior import Pipeline
+from models.train_config import TrainConfig
+from models.trainingdata import PreparedData
+
+
+def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, epochs: int,
+                  steps: int, val_steps: int) -> dict[str, Any]:
+    return {
+        "config": asdict(config),
+        "resolved": {
+            "epochs": epochs, "steps_per_epoch": steps,
+            "validation_steps": val_steps,
+            "deletion_rate": pipeline.deletion_rate, "optimizer": "Adam", "loss": "MSE",
+            "train_samples": int(len(data.train)), "val_samples": int(len(data.val)),
+            "zero_steer_train_samples": int((data.steering[data.train] == 0).sum()),
+            "split": asdict(data.split) | {"kind": data.split.kind.value},
+        },
+        "rows": data.counts,
+        "augment": asdict(pipeline.augment),
+        "contract": asdict(pipeline.contract),
+        "logs": [{"path": str(r.log), "rows": r.rows, "samples": r.used, "skipped": len(r.skipped)}
+                 for r in data.dataset.reports],
+        "unreadable_frames": len(data.cache.errors),
+        "code_version": runrecords.code_version(),
+        "torch": torch.__version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }

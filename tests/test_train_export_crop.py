@@ -1,0 +1,111 @@
+"""The exported model is the best epoch's (or the last, on request), and a crop travels in the contract so
+drive_server feeds the network exactly the pixels training did."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+ort = pytest.importorskip("onnxruntime")
+
+from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract  # noqa: E402
+from drive_server.model import SteeringModel  # noqa: E402
+from drive_server.pipeline import DrivePipeline  # noqa: E402
+from drive_server.preprocess import to_input_tensor  # noqa: E402
+from models import train as train_mod  # noqa: E402
+from models.framecache import build_cache, load_frame  # noqa: E402
+from models.nets import ContractInput, build_model  # noqa: E402
+from models.train import TrainConfig, train  # noqa: E402
+from protocol.datalog import read_log  # noqa: E402
+
+SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
+pytestmark = pytest.mark.slow
+
+
+def _config(out: Path, **kw) -> TrainConfig:
+    base = dict(data=[str(SAMPLE)], out=str(out), epochs=3, max_steps_per_epoch=2, threads=1, decode_workers=1,
+                progress=False, seed=4)
+    return TrainConfig(**{**base, **kw})
+
+
+def _onnx_outputs(path: Path, x: np.ndarray) -> np.ndarray:
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    return session.run(None, {session.get_inputs()[0].name: x})[0]
+
+
+def _torch_outputs(state: dict, x: np.ndarray) -> np.ndarray:
+    net = build_model("shallow", 64, 64)
+    net.load_state_dict(state)
+    with torch.no_grad():
+        return ContractInput(net, "nhwc").eval()(torch.from_numpy(x)).numpy()
+
+
+@pytest.mark.parametrize(("export", "epoch"), [("best", 2), ("last", 3)])
+def test_the_exported_model_is_the_best_epoch(tmp_path: Path, monkeypatch, export: str, epoch: int) -> None:
+    losses = iter([0.30, 0.10, 0.20])  # epoch 2 is the best; the run ends worse
+    monkeypatch.setattr(train_mod, "evaluate", lambda *a, **k: next(losses))
+    result = train(_config(tmp_path / export, export=export))
+    record = json.loads((result.run_dir / "config.json").read_text())
+    assert record["result"]["exported_epoch"] == epoch and record["result"]["export"] == export
+    assert result.val_loss == pytest.approx([0.30, 0.10, 0.20][epoch - 1])
+    assert record["result"]["last_epoch_val_mse"] == pytest.approx(0.20)
+    meta = json.loads(ort.InferenceSession(str(result.onnx)).get_modelmeta().custom_metadata_map[
+        METADATA_MODEL_INFO_KEY])
+    assert meta["exported_epoch"] == epoch and meta["val_mse"] == pytest.approx(result.val_loss)
+    checkpoint = torch.load(result.run_dir / "checkpoint.pt", weights_only=False)
+    samples, _ = read_log(SAMPLE)
+    x = to_input_tensor(build_cache(samples[:8], PreprocessContract(), ("center",), workers=1).frames[0],
+                        PreprocessContract())
+    got = _onnx_outputs(result.onnx, x)
+    best, last = _torch_outputs(checkpoint["best_model"], x), _torch_outputs(checkpoint["model"], x)
+    assert not np.allclose(best, last, atol=1e-4)  # the two candidates differ, so the check below means something
+    assert np.abs(got - (best if export == "best" else last)).max() < 1e-4
+
+
+def test_crop_is_carried_through_the_contract_and_served_identically(tmp_path: Path) -> None:
+    result = train(_config(tmp_path / "crop", epochs=1, max_steps_per_epoch=1, crop_top=64, crop_bottom=136))
+    session = ort.InferenceSession(str(result.onnx), providers=["CPUExecutionProvider"])
+    contract = PreprocessContract.from_json(session.get_modelmeta().custom_metadata_map[METADATA_KEY])
+    assert (contract.crop_top, contract.crop_bottom) == (64, 136)
+    record = json.loads((result.run_dir / "config.json").read_text())
+    assert record["contract"]["crop_top"] == 64 and record["config"]["crop_bottom"] == 136
+    model = SteeringModel(result.onnx)
+    assert model.contract == contract
+    pipeline = DrivePipeline(model)
+    samples, _ = read_log(SAMPLE)
+    trained_on = build_cache(samples[:5], contract, ("center",), workers=1).frames[0]  # what training fed the net
+    for i, s in enumerate(samples[:5]):
+        rgb = load_frame(s.center, pipeline.reduce)  # what drive_server decodes from the wire
+        served = float(_onnx_outputs(result.onnx, to_input_tensor(trained_on[i], contract))[0, 0])
+        assert pipeline.steer(rgb) == pytest.approx(max(-1.0, min(1.0, served)), abs=1e-6)
+    # and the crop matters: the same frames uncropped give other inputs
+    full = build_cache(samples[:1], PreprocessContract(), ("center",), workers=1).frames[0]
+    assert np.abs(full.astype(int) - trained_on[:1]).mean() > 5
+
+
+def test_inspect_scores_validation_frames_only_and_says_so(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("matplotlib")
+    from models.metrics import steering_metrics
+    from models.trainingdata import prepare_data
+    from tools.cli import main
+
+    config = _config(tmp_path / "run", epochs=1, max_steps_per_epoch=2)
+    result = train(config)
+    capsys.readouterr()
+    assert main(["inspect", str(result.run_dir), "--frames", "20", "--samples", "1"]) == 0
+    out = capsys.readouterr().out
+    stored = TrainConfig.from_dict(json.loads((result.run_dir / "config.json").read_text())["config"])
+    data = prepare_data(stored.data, stored.pipeline(), stored.seed, stored.data_options(), workers=1)
+    window = data.usable[:20]
+    val = window[np.isin(window, data.val)]
+    assert 0 < len(val) < len(window)  # the plotted window holds training frames too: they must not count
+    x = to_input_tensor(data.cache.frames[0, val], stored.pipeline().contract)
+    expected = steering_metrics(_onnx_outputs(result.onnx, x).ravel(), data.steering[val])
+    line = next(ln for ln in out.splitlines() if ln.startswith("plotted window"))
+    assert "validation frames only (blocks split)" in line and f"({len(val)} frames)" in line
+    assert f"MSE {expected['mse']:.4f}" in line
+    assert "all validation frames, as rbc train reported them" in out
