@@ -115,7 +115,7 @@ def test_scenario_config_validates():
         ScenarioConfig(vehicle="hovercraft")
 
 
-@pytest.mark.parametrize("command", ["sim", "collect", "eval"])
+@pytest.mark.parametrize("command", ["sim", "collect", "eval", "demo"])
 def test_vehicle_flag_shows_its_default(command, capsys):
     from tools.cli import main
 

@@ -39,7 +39,7 @@ def test_understeer_path_radius_grows_with_speed():
     speeds = [5.0, 10.0, 15.0, 20.0, 25.0]
     radii = [_radius(_steady(_car(v), steering, v)) for v in speeds]
     assert all(b > a * 1.05 for a, b in zip(radii, radii[1:], strict=False)), radii
-    # linear theory (Rajamani 2012, eq. 3.16): R = (L + K v^2) / delta, K = m / L (lr / Cf - lf / Cr)
+    # linear-tyre steady state: R = (L + K v^2) / delta with the understeer gradient K = m / L (lr / Cf - lf / Cr)
     L, lf, lr = P.wheelbase_m, P.cg_to_front_axle_m, P.cg_to_rear_axle_m
     K = P.mass_kg / L * (lr / P.cornering_stiffness_front_n_per_rad - lf / P.cornering_stiffness_rear_n_per_rad)
     for v, r in zip(speeds, radii, strict=True):
@@ -190,3 +190,16 @@ def test_make_vehicle_and_parameter_validation():
         VehicleParams(cg_to_front_axle_m=3.0)
     with pytest.raises(ValueError, match="kinematic_below"):
         VehicleParams(kinematic_below_mps=5.0, dynamic_above_mps=4.0)
+
+
+def test_sim_bench_reports_both_cars(tmp_path):
+    """``rbc sim-bench``'s car figures: one line per car model, and the in-process loop (behaviour, not speed)."""
+    from tests.conftest import write_stadium
+    from tools.bench.vehicle_models import inprocess_loop, physics_step_costs
+
+    lines = physics_step_costs(repeats=1, frames=30)
+    assert any(line.strip().startswith("kinematic") for line in lines)
+    assert any("dynamic" in line and "integration step" in line for line in lines)
+    assert any("CommonRoad" in line for line in lines)  # its cost, or how to install it
+    line = inprocess_loop(write_stadium(tmp_path), "dynamic", seconds=1.0)
+    assert "frames/s wall" in line and "per CPU-second" in line

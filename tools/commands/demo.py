@@ -15,10 +15,9 @@ from pathlib import Path
 from protocol.facts import BEHAVIORS
 from tools.evaluate.experiments import SETUPS
 from tools.sim.scenario import ScenarioConfig
+from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.demo")
-
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
@@ -27,6 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--laps", type=int, default=ScenarioConfig.laps, help="laps to drive (default %(default)s)")
     p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
                    help="drive_server --speed-limit in km/h (default %(default)s)")
+    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=ScenarioConfig.vehicle,
+                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
 
 
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     stats_path = out / "server_stats.json"
     setup = SETUPS[args.behavior]  # the scene each bundled behavior was trained on, so is demonstrated on
     config = ScenarioConfig(track=setup.track, cones=setup.cones, cone_seed=setup.cone_seed, laps=args.laps,
-                            speed_limit_kmh=args.speed_limit)
+                            speed_limit_kmh=args.speed_limit, vehicle=args.vehicle)
     strip = StripCollector(every_s=8.0)
     server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0"],
                            stats_json=stats_path)
@@ -70,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     except ServerStartError as exc:
         log.error("%s", exc)
         return 2
-    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track}")
+    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track} "
+          f"({config.vehicle} car)")
     progress = Progress(f"demo {config.track}")
     try:
         with SocketDriver(url) as driver:

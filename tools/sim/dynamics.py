@@ -6,13 +6,14 @@ lateral force, the force saturates at ``mu * Fz``, and the path radius for a whe
 speed (understeer) until the car cannot follow the road at all.
 
 Why not CommonRoad's implementation (``commonroad-vehicle-models`` 3.0.2, measured by
-``rbc sim-bench``, :mod:`tools.bench.vehicle_models`): its cost is fine (ST 1.3-1.9 us, STD 7.6-10.6 us per
-derivative on this CPU) but its ST model has LINEAR tyres (``F_y = mu * C_S * F_z * alpha``): lateral
-acceleration never saturates (10 g at 30 m/s and 0.3 rad in the measurement) and, with the same
-cornering coefficient per unit load front and rear, the published cars steer neutrally, so neither
-understeer nor a grip limit appears. Its STD model has saturating Pacejka tyres but wheel-spin states
-whose stiffness needs kHz steps near standstill (explicit Euler at 180 Hz rolls it backwards at a
-stop). So the same single-track equations are written here with a saturating brush tyre.
+``rbc sim-bench``, :mod:`tools.bench.vehicle_models`): its cost is fine (ST 1.3-2.8 us, STD
+7.6-11.9 us per Euler step on this CPU; this model 4.1-5.7 us per step, 12-17 us per 60 Hz frame),
+but its ST model has LINEAR tyres (``F_y = mu * C_S * F_z * alpha``): lateral acceleration never
+saturates (10 g at 30 m/s and 0.3 rad in the measurement) and, with the same cornering coefficient
+per unit load front and rear, the published cars steer neutrally, so neither understeer nor a grip
+limit appears. Its STD model has saturating Pacejka tyres but wheel-spin states whose stiffness
+needs kHz steps near standstill (explicit Euler at 180 Hz rolls it backwards at a stop). So the
+same single-track equations are written here, with a saturating brush tyre.
 
 Equations (body frame at the centre of gravity: x forward, y left, yaw rate r counter-clockwise;
 Rajamani, *Vehicle Dynamics and Control*, 2nd ed., 2012, sec. 2.3; CommonRoad: Althoff & Wuersching,
@@ -26,14 +27,16 @@ Rajamani, *Vehicle Dynamics and Control*, 2nd ed., 2012, sec. 2.3; CommonRoad: A
 
 Lateral tyre force: the brush (Fiala) model, Pacejka, *Tire and Vehicle Dynamics*, 3rd ed., 2012,
 sec. 3.2, in the form of Hindiyeh & Gerdes, "A controller framework for autonomous drifting", 2014,
-with the friction circle derating ``Fy_max = sqrt((mu Fz)^2 - Fx^2)``. Longitudinal force: engine
+with the friction circle derating ``Fy_max = sqrt((mu Fz)^2 - Fx^2)``. The axles' friction is the
+surface's times a front/rear grip balance (0.95 / 1.05) so that the car understeers at the limit
+(see ``VehicleParams``). Longitudinal force: engine
 (``min(F_max, P / v)``) and brakes split per axle, each axle held at ``mu * Fz`` at most (ABS, no wheel
 states). Resistance: aerodynamic drag ``rho Cd A v^2 / 2`` and rolling resistance ``c_rr m g``.
 
 Low speed: the slip angles are singular at standstill. Below ``kinematic_below_mps`` the velocity
 state is the kinematic bicycle's (``vy = lr r``, ``r = vx tan(d) / L``), above ``dynamic_above_mps``
 the tyre model's, blended linearly in speed in between (the kinematic/dynamic blend of Kabzan et al.,
-"AMZ Driverless: The full autonomous racing system", J. Field Robotics, 2019). Blending the states
+"AMZ Driverless: The full autonomous racing system", arXiv 1905.05150, 2019). Blending the states
 rather than the derivatives puts the car exactly on the kinematic path at walking speed.
 
 Integration: explicit Euler for the velocities at ``dynamics_hz`` (180 Hz: 3 steps per 60 Hz
