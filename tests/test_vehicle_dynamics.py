@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -203,3 +204,29 @@ def test_sim_bench_reports_both_cars(tmp_path):
     assert any("CommonRoad" in line for line in lines)  # its cost, or how to install it
     line = inprocess_loop(write_stadium(tmp_path), "dynamic", seconds=1.0)
     assert "frames/s wall" in line and "per CPU-second" in line
+
+
+def test_the_simulation_gives_the_car_the_surface_it_drives_on(tmp_path):
+    import json
+
+    from protocol import SteerCommand
+    from tests.conftest import write_stadium
+    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.simulation import Simulation
+
+    def braking_distance(surface: str) -> float:
+        path = tmp_path / f"{surface}.json"
+        data = json.loads(Path(write_stadium(tmp_path)).read_text())
+        data["surfaces"] = [{"from_s": 0.0, "to_s": 500.0, "kind": surface}]
+        path.write_text(json.dumps(data))
+        sim = Simulation(ScenarioConfig(track=str(path), vehicle="dynamic"), render=False)
+        while sim.vehicle.state.speed < kmh_to_mps(60.0):
+            sim.advance(1, SteerCommand(0.0, 1.0))
+        start = sim.progress
+        while sim.vehicle.state.speed > 0.0:
+            sim.advance(1, SteerCommand(0.0, -1.0))
+        assert not sim.laps and not sim.scorer.interventions
+        return sim.progress - start
+
+    asphalt, dirt = braking_distance("asphalt"), braking_distance("dirt")
+    assert dirt / asphalt == pytest.approx(P.friction("asphalt") / P.friction("dirt"), rel=0.1)
