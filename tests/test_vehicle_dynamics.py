@@ -230,3 +230,16 @@ def test_the_simulation_gives_the_car_the_surface_it_drives_on(tmp_path):
 
     asphalt, dirt = braking_distance("asphalt"), braking_distance("dirt")
     assert dirt / asphalt == pytest.approx(P.friction("asphalt") / P.friction("dirt"), rel=0.1)
+
+
+def test_telemetry_reports_the_wheel_angle_and_speed_of_the_dynamic_car():
+    from protocol import SteerCommand
+    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.simulation import Simulation
+
+    sim = Simulation(ScenarioConfig(track="lake", vehicle="dynamic", speed_unit="kmh"), render=False)
+    sim.advance(240, SteerCommand(0.3, 1.0))
+    st, payload = sim.vehicle.state, sim.telemetry("")
+    assert float(payload["steering_angle"]) == pytest.approx(0.3 * P.max_steer_deg, abs=1e-4)  # + = right
+    assert float(payload["speed"]) == pytest.approx(st.speed * 3.6, abs=1e-4) and st.speed > 5.0
+    assert float(payload["throttle"]) == 1.0
