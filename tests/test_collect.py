@@ -114,3 +114,10 @@ def test_ctrl_c_leaves_only_complete_rows(small_track, tmp_path):
     assert len(lines) == result.rows
     assert len(_read(out)) == result.rows  # every row parses and has its three images
     assert len(list((out / "IMG").iterdir())) == 3 * result.rows  # and no image without a row
+
+
+def test_the_dynamic_car_collects_without_intervention(small_track, tmp_path):
+    result = collect(_config(small_track, both_directions=True, cameras=1, rate_hz=1.0, vehicle="dynamic"),
+                     tmp_path / "dyn")
+    assert len(result.laps) == 2 and all(lap.completed for lap in result.laps) and result.interventions == 0
+    assert 20.0 < result.laps[0].mean_speed_kmh < 31.0

@@ -100,3 +100,12 @@ def test_plot_points_draw_a_range_from_its_no_variation_run():
     assert [(round(x, 6), y, ok) for x, y, ok in points] == [(-0.2, 90.0, False), (0.0, 100.0, True),
                                                               (0.2, 100.0, True)]
     assert plot_points(experiment("orientation"), {"measure": "range", "origin": 0.0}, records) == []
+
+
+def test_the_car_model_reaches_every_run_of_the_suite():
+    from tools.evaluate.suite import SuiteConfig, base_scenario
+    from tools.sim.scenario import ScenarioConfig
+
+    assert base_scenario(SuiteConfig())["vehicle"] == ScenarioConfig.vehicle
+    scenario = base_scenario(SuiteConfig(vehicle="dynamic"))
+    assert scenario["vehicle"] == "dynamic" and ScenarioConfig(**scenario).vehicle == "dynamic"

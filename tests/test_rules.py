@@ -199,3 +199,46 @@ def test_autopilot_laps_the_test_track_in_both_directions(tmp_path):
         assert lap.completed and lap.n_interventions == 0 and lap.eta == 100.0
         assert lap.distance_m == pytest.approx(result.track_length_m, abs=1.0)
         assert lap.cte_max_m < 1.0
+
+
+# ------------------------------------------------------------------------------------- spinning out
+
+
+def test_sliding_sideways_for_a_quarter_second_is_a_spin_out():
+    ref = _referee()
+    dt = 1 / 60
+    over = math.radians(DEFAULT_RULES.spin_out_slip_deg + 5)
+    assert ref.check(dt, 0, 0, 0.0, 20.0, 0.0, 0.0, slip=math.radians(25)) is None  # hard cornering is fine
+    causes = [ref.check(dt, 0, 0, 0.0, 20.0, 0.0, 0.0, slip=-over) for _ in range(15)]
+    assert causes == [None] * 14 + [Cause.SPIN_OUT]  # 15 frames = 0.25 s
+    ref.reset_timers()
+    assert [ref.check(dt, 0, 0, 0.0, 0.1, 0.0, 0.0, slip=over) for _ in range(30)] == [None] * 30  # at rest
+
+
+def test_the_dynamic_car_spins_out_under_full_lock_and_full_brake_at_speed(tmp_path):
+    wide = stadium(tmp_path, road_width=30.0, straight=500.0, radius=120.0)
+
+    def policy() -> Callable[[Frame], SteerCommand]:
+        """Flat out down the straight; past 90 km/h yank the wheel to full lock and brake, and keep them there."""
+        yanked = []
+
+        def command(frame: Frame) -> SteerCommand:
+            if yanked or frame.truth.speed > kmh_to_mps(90.0):
+                yanked.append(frame.t)
+                return SteerCommand(1.0, -1.0)
+            return SteerCommand(0.0, 1.0)
+        return command
+
+    config = ScenarioConfig(track=wide, vehicle="dynamic", max_lap_time_s=15.0)
+    lap = _run(config, Scripted(policy())).laps[0]
+    assert lap.interventions and lap.interventions[0].cause is Cause.SPIN_OUT
+    kinematic = _run(replace(config, vehicle="kinematic"), Scripted(policy())).laps[0]  # follows its arc, stops
+    assert Cause.SPIN_OUT not in {i.cause for i in kinematic.interventions}
+
+
+def test_autopilot_laps_the_test_track_with_the_dynamic_car(tmp_path):
+    for reverse in (False, True):
+        config = ScenarioConfig(track=stadium(tmp_path, radius=25.0), reverse=reverse, vehicle="dynamic")
+        lap = _run(config, AutopilotDriver(seed=1)).laps[0]
+        assert lap.completed and lap.n_interventions == 0 and lap.eta == 100.0
+        assert lap.cte_max_m < 1.0

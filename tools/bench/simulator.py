@@ -103,7 +103,7 @@ def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None
               f"{np.mean(sizes) / 1024:.1f} KiB/frame")
 
 
-def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
+def lap_wall_time(tracks: list[Track], args: argparse.Namespace, vehicle: str = "kinematic") -> str | None:
     """Closed loop over the socket: one lock-step lap of lake against a real drive_server, on ONE core.
 
     This process and the server it starts are pinned to the same CPU (children inherit the
@@ -133,14 +133,15 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace) -> str | None:
             os.sched_setaffinity(0, {min(before)})
         try:
             with ServerProcess(model, ["--log-every", "0"]) as server, SocketDriver(server.url) as driver:
-                result = run_scenario(ScenarioConfig(track="lake", speed_limit_kmh=DEPLOY_SPEED_KMH), driver)
+                result = run_scenario(ScenarioConfig(track="lake", speed_limit_kmh=DEPLOY_SPEED_KMH, vehicle=vehicle),
+                                      driver)
         finally:
             if can_pin:
                 os.sched_setaffinity(0, before)
     lap = result.laps[0] if result.laps else None
     per_frame = result.wall_time_s / max(1, result.frames)
     frames_25 = result.track_length_m / (25 / 3.6) * result.config.control_hz  # a lap at a steady 25 km/h
-    return (f"closed-loop lap over the socket ({model.name}, {'one core' if can_pin else 'unpinned'}): "
+    return (f"closed-loop lap over the socket ({model.name}, {vehicle} car, {'one core' if can_pin else 'unpinned'}): "
             f"{result.wall_time_s:.1f} s wall for {result.sim_time_s:.0f} s simulated, {result.frames} frames "
             f"({per_frame * 1e3:.2f} ms/frame), eta {lap.eta if lap else 0:.1f} %; "
             f"a 1 km lap at 25 km/h ({frames_25:.0f} frames) projects to {frames_25 * per_frame:.1f} s wall")

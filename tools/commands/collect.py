@@ -9,6 +9,7 @@ from pathlib import Path
 from tools.arguments import add_speed_unit_argument
 from tools.console import Progress
 from tools.sim.collect import CollectConfig
+from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.collect")
 
@@ -35,6 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="scene light intensity (default %(default)s)")
     p.add_argument("--light-direction", type=float, default=d.light_direction_deg,
                    help="sun direction offset in degrees (default %(default)s)")
+    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=d.vehicle,
+                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--overwrite", action="store_true", help="replace an existing log and IMG/ in --out")
     group.add_argument("--append", action="store_true", help="add rows to an existing log in --out")
@@ -47,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         track=args.track, laps=args.laps, both_directions=args.both_directions, cones=args.cones,
         cone_seed=args.cone_seed, cameras=args.cameras, rate_hz=args.rate_hz, seed=args.seed,
         speed_kmh=args.speed_kmh, speed_unit=args.speed_unit, light_intensity=args.light_intensity,
-        light_direction_deg=args.light_direction)
+        light_direction_deg=args.light_direction, vehicle=args.vehicle)
     progress = Progress(f"collect {args.track}")
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)

@@ -16,10 +16,9 @@ from protocol.facts import BEHAVIORS
 from tools.errors import CommandError
 from tools.evaluate.experiments import SETUPS
 from tools.sim.scenario import ScenarioConfig
+from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.demo")
-
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
@@ -28,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--laps", type=int, default=ScenarioConfig.laps, help="laps to drive (default %(default)s)")
     p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
                    help="drive_server --speed-limit in km/h (default %(default)s)")
+    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=ScenarioConfig.vehicle,
+                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
 
 
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     stats_path = out / "server_stats.json"
     setup = SETUPS[args.behavior]  # the scene each bundled behavior was trained on, so is demonstrated on
     config = ScenarioConfig(track=setup.track, cones=setup.cones, cone_seed=setup.cone_seed, laps=args.laps,
-                            speed_limit_kmh=args.speed_limit)
+                            speed_limit_kmh=args.speed_limit, vehicle=args.vehicle)
     strip = StripCollector(every_s=8.0)
     server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0"],
                            stats_json=stats_path)
@@ -69,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
         url = server.start()
     except ServerStartError as exc:
         raise CommandError(str(exc)) from exc
-    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track}", flush=True)
+    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track} "
+          f"({config.vehicle} car)", flush=True)
     progress = Progress(f"demo {config.track}")
     try:
         with SocketDriver(url) as driver:

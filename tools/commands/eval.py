@@ -19,6 +19,7 @@ from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, Runner, spec_dict
 from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
 from tools.sim.track_file import get_track
+from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.eval")
 
@@ -40,6 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track", help="override the behavior's track (name or JSON file)")
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
                    help="km/h for every experiment but the speed one (default %(default)s)")
+    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=d.vehicle,
+                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
     p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "
@@ -75,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
                                             "driver": driver_identity(spec)}, args.resume)
     cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
-                      map_dir=str(out / "failures"))
+                      map_dir=str(out / "failures"), vehicle=args.vehicle)
     meta = {"model": str(model), "model_sha256": model_sha, "code_version": code_version(),
             "behavior": args.behavior, "seeds": args.seeds, "base_seed": args.seed, "laps": args.laps,
             "workers": args.workers, "driver": spec_dict(spec), "autonomy_rule": AUTONOMY_RULE,

@@ -12,6 +12,7 @@ from tools.console import Progress
 from tools.errors import CommandError
 from tools.sim.scenario import ScenarioConfig
 from tools.sim.summary import print_summary
+from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.sim")
 
@@ -47,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="gain of the throttle/brake law for --model, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
     add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
+    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=d.vehicle,
+                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
     p.add_argument("--realtime", action="store_true",
                    help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
     p.add_argument("--control-hz", type=float, default=d.control_hz,
@@ -86,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         light_direction_deg=args.light_direction, cones=args.cones, cone_seed=args.cone_seed, spawn_s=spawn_s,
         yaw_offset_deg=args.yaw_offset, reverse=args.reverse, speed_limit_kmh=args.speed_limit,
         realtime=args.realtime, control_hz=args.control_hz, seed=args.seed, max_lap_time_s=args.max_lap_time,
-        speed_unit=args.speed_unit)
+        speed_unit=args.speed_unit, vehicle=args.vehicle)
     if args.server:
         note = "speed limit: the drive server's own (--speed-limit applies to --model only)"
         if args.speed_limit != ScenarioConfig.speed_limit_kmh:

@@ -11,8 +11,10 @@ from pathlib import Path
 import cv2
 
 from tools.bench.simulator import bench_track, lap_wall_time, write_sheet
+from tools.bench.vehicle_models import inprocess_loop, physics_step_costs
 from tools.sim.cones import place_cones
 from tools.sim.track_file import load_track
+from tools.sim.vehicle import VEHICLE_KINDS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="contact sheet of sample frames (default out/sim_sheet.png)")
     parser.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
     parser.add_argument("--no-lap", action="store_true", help="skip the closed-loop lap over the socket")
+    parser.add_argument("--vehicles", nargs="+", choices=VEHICLE_KINDS, default=list(VEHICLE_KINDS),
+                        help="car models for the physics, in-process and socket figures (default: all)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,9 +42,17 @@ def run(args: argparse.Namespace) -> int:
     lake = next((t for t in tracks if t.name == "lake"), None)
     if lake is not None and args.cones:
         bench_track(lake, args, cones=place_cones(lake, args.cones, args.seed), builds=False)
-    report = lap_wall_time(tracks, args)
-    if report:
-        print(report)
+    print("\nphysics per step (best of runs):")
+    for line in physics_step_costs(args.repeats):
+        print(line)
+    print("in-process closed loop, render + JPEG + physics + referee (autopilot driving, one OpenCV thread):")
+    for spec in args.tracks:
+        for vehicle in args.vehicles:
+            print(inprocess_loop(spec, vehicle))
+    for vehicle in args.vehicles:
+        report = lap_wall_time(tracks, args, vehicle)
+        if report:
+            print(report)
     if not args.no_sheet:
         path = write_sheet(tracks, args)
         print(f"contact sheet: {path}")

@@ -18,6 +18,7 @@ from protocol.facts import DEPLOY_SPEED_KMH
 from tools.evaluate.experiments import EXPERIMENTS, SETUPS, Experiment, is_autonomous
 from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
+from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +33,7 @@ class SuiteConfig:
     experiments: tuple[str, ...] = tuple(e.key for e in EXPERIMENTS)
     track: str | None = None  # override the behavior's track (e.g. a short test track)
     map_dir: str | None = None
+    vehicle: str = VEHICLE_KINDS[0]  # the car model (ScenarioConfig.vehicle)
     overrides: dict[str, Any] = field(default_factory=dict)  # extra ScenarioConfig fields
 
 
@@ -42,7 +44,7 @@ class SearchStopped(Exception):
 def base_scenario(cfg: SuiteConfig) -> dict[str, Any]:
     setup = SETUPS[cfg.behavior]
     scenario = {"track": cfg.track or setup.track, "laps": cfg.laps, "cones": setup.cones,
-                "cone_seed": setup.cone_seed, "speed_limit_kmh": cfg.speed_limit_kmh}
+                "cone_seed": setup.cone_seed, "speed_limit_kmh": cfg.speed_limit_kmh, "vehicle": cfg.vehicle}
     scenario.update(cfg.overrides)
     return scenario
 

@@ -27,6 +27,7 @@ class Cause(StrEnum):
     CONE = "cone"  # the body touched a cone
     STUCK = "stuck"  # standing still too long
     WRONG_WAY = "wrong_way"  # heading against the lap direction too long
+    SPIN_OUT = "spin_out"  # sliding sideways: body slip angle beyond the limit too long (dynamic car)
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,10 @@ class Rules:
     stuck_time_s: float = 5.0
     wrong_way_deg: float = 100.0
     wrong_way_time_s: float = 2.0
+    # A car whose velocity points this far from its heading is spinning, not cornering (a saloon's
+    # body slip stays under ~5 deg at its grip limit); a person takes over when it lasts this long.
+    spin_out_slip_deg: float = 30.0
+    spin_out_time_s: float = 0.25
     reset_ahead_m: float = 5.0  # the person puts the car back this far along the lap
     reset_speed_kmh: float = 15.0  # ... rolling at this speed
     reset_cone_clearance_m: float = 3.0  # ... and never right on top of a cone
@@ -171,15 +176,17 @@ class Referee:
         self.car_length, self.car_width = car_length, car_width
         self._stuck_speed = kmh_to_mps(rules.stuck_speed_kmh)
         self._wrong_way = math.radians(rules.wrong_way_deg)
+        self._spin_slip = math.radians(rules.spin_out_slip_deg)
         self.reset_timers()
 
     def reset_timers(self) -> None:
         self.still_s = 0.0
         self.wrong_s = 0.0
+        self.spin_s = 0.0
 
     def check(self, dt: float, cx: float, cy: float, yaw: float, speed: float, cte: float,
-              track_heading: float) -> Cause | None:
-        """One physics frame; returns the cause of an intervention or None."""
+              track_heading: float, slip: float = 0.0) -> Cause | None:
+        """One physics frame; returns the cause of an intervention or None. ``slip``: body slip angle, rad."""
         if abs(cte) > self.half_width + self.rules.offroad_margin_m:
             return Cause.OFF_ROAD
         if len(self.cones) and len(body_hits(cx, cy, yaw, self.car_length, self.car_width, self.cones,
@@ -195,6 +202,9 @@ class Referee:
             self.wrong_s = 0.0
         if self.wrong_s >= self.rules.wrong_way_time_s - 1e-9:
             return Cause.WRONG_WAY
+        self.spin_s = self.spin_s + dt if abs(slip) > self._spin_slip and speed > self._stuck_speed else 0.0
+        if self.spin_s >= self.rules.spin_out_time_s - 1e-9:
+            return Cause.SPIN_OUT
         return None
 
 

@@ -15,7 +15,7 @@ from tools.sim.rules import (
     LapResult,
     Rules,
 )
-from tools.sim.vehicle import VehicleState, kmh_to_mps
+from tools.sim.vehicle import VEHICLE_KINDS, VehicleState, kmh_to_mps
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,8 @@ class ScenarioConfig:
     spawn_noise: bool = False
     max_lap_time_s: float | None = None  # None: 4x the time of a lap at the speed limit, at least 120 s
     speed_unit: str = SpeedUnit.MPH.value  # telemetry speed unit: mph like the stock simulator, or kmh
+    # the car: "kinematic" bicycle (no slip) or "dynamic" single-track model with tyre slip (tools.sim.dynamics)
+    vehicle: str = VEHICLE_KINDS[0]
 
     def __post_init__(self) -> None:
         if self.laps < 1:
@@ -58,6 +60,8 @@ class ScenarioConfig:
         if self.speed_limit_kmh <= 0:
             raise ValueError(f"speed limit must be positive, got {self.speed_limit_kmh} km/h")
         SpeedUnit(self.speed_unit)
+        if self.vehicle not in VEHICLE_KINDS:
+            raise ValueError(f"vehicle must be one of {', '.join(VEHICLE_KINDS)}, got {self.vehicle!r}")
 
     @property
     def frames_per_command(self) -> int:

@@ -13,6 +13,7 @@ import numpy as np
 from protocol import SpeedUnit, SteerCommand, encode_telemetry
 from protocol.units import from_kmh
 from tools.sim.cones import place_cones
+from tools.sim.dynamics import make_vehicle
 from tools.sim.rules import (
     DEFAULT_RULES,
     Cause,
@@ -25,8 +26,9 @@ from tools.sim.rules import (
     body_hits,
 )
 from tools.sim.scenario import ScenarioConfig, Trace
+from tools.sim.track import SURFACE_KINDS
 from tools.sim.track_file import get_track
-from tools.sim.vehicle import Vehicle, VehicleParams, VehicleState, kmh_to_mps
+from tools.sim.vehicle import VehicleParams, VehicleState, kmh_to_mps
 
 log = logging.getLogger(__name__)
 
@@ -59,8 +61,11 @@ class Simulation:
             noise = np.random.default_rng([config.seed, 7919])  # own stream: camera jitter stays as it was
             lateral, dyaw = noise.uniform(-0.5, 0.5), math.radians(noise.uniform(-3.0, 3.0))
             x, y, yaw = x - math.sin(heading) * lateral, y + math.cos(heading) * lateral, yaw + dyaw
-        self.vehicle = Vehicle(VehicleState(0.0, 0.0, 0.0), self.params)
+        self.vehicle = make_vehicle(config.vehicle, VehicleState(0.0, 0.0, 0.0), self.params)
         self.vehicle.place(x, y, yaw)
+        # tyre-road friction at every track sample, from its surface kind (what the dynamic car grips with)
+        by_kind = [self.params.friction(kind) for kind in SURFACE_KINDS]
+        self._friction = [by_kind[k] for k in track.surface_kinds().tolist()]
         self.follower = TrackFollower(track, x, y)
         self.proj = self.follower.project(x, y)
         self.referee = Referee(rules, track.road_width, self.direction, self.cones, self.params.length_m,
@@ -99,6 +104,7 @@ class Simulation:
 
     def _step(self, command: SteerCommand) -> None:
         dt = self.params.dt
+        self.vehicle.friction = self._friction[self.follower.i]  # the surface under the car (last frame's)
         st = self.vehicle.step(command.steering, command.throttle)
         cx, cy = self.vehicle.center
         prev_s = self.proj.s
@@ -108,7 +114,7 @@ class Simulation:
         lat = proj.cte * self.direction
         self.scorer.sample(dt, st.speed, lat - self.line_offset, lat if self.track.lanes == 2 else None)
         self._trace.append((self.t, cx, cy, lat - self.line_offset, st.speed, self.scorer.lap))
-        cause = self.referee.check(dt, cx, cy, st.yaw, st.speed, proj.cte, proj.heading_rad)
+        cause = self.referee.check(dt, cx, cy, st.yaw, st.speed, proj.cte, proj.heading_rad, st.slip)
         if cause is not None:
             self._intervene(cause, cx, cy)
         if self.progress >= self.scorer.lap * self.track.length:
