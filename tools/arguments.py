@@ -64,3 +64,12 @@ def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
         raise ValueError(f"--min-speed {text!r}: give a number with an optional unit, e.g. 5mph or 8kmh")
     unit = (m.group(2) or default_unit).replace("km/h", "kmh")
     return float(m.group(1)), unit
+
+
+def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--vehicle``: which car model the headless simulator drives."""
+    from tools.sim.vehicle import VEHICLE_KINDS
+
+    parser.add_argument("--vehicle", choices=VEHICLE_KINDS, default=default,
+                        help="car model: kinematic bicycle, or dynamic single-track with tyre slip "
+                             "(default %(default)s)")

@@ -6,10 +6,9 @@ import argparse
 import logging
 from pathlib import Path
 
-from tools.arguments import add_speed_unit_argument
+from tools.arguments import add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.sim.collect import CollectConfig
-from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.collect")
 
@@ -36,8 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="scene light intensity (default %(default)s)")
     p.add_argument("--light-direction", type=float, default=d.light_direction_deg,
                    help="sun direction offset in degrees (default %(default)s)")
-    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=d.vehicle,
-                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
+    add_vehicle_argument(p, d.vehicle)
     group = p.add_mutually_exclusive_group()
     group.add_argument("--overwrite", action="store_true", help="replace an existing log and IMG/ in --out")
     group.add_argument("--append", action="store_true", help="add rows to an existing log in --out")

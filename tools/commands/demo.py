@@ -13,10 +13,10 @@ import logging
 from pathlib import Path
 
 from protocol.facts import BEHAVIORS
+from tools.arguments import add_vehicle_argument
 from tools.errors import CommandError
 from tools.evaluate.experiments import SETUPS
 from tools.sim.scenario import ScenarioConfig
-from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.demo")
 
@@ -27,8 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--laps", type=int, default=ScenarioConfig.laps, help="laps to drive (default %(default)s)")
     p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
                    help="drive_server --speed-limit in km/h (default %(default)s)")
-    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=ScenarioConfig.vehicle,
-                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
+    add_vehicle_argument(p, ScenarioConfig.vehicle)
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
 
 

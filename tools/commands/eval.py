@@ -11,6 +11,7 @@ from pathlib import Path
 
 from drive_server.model import SteeringModel
 from drive_server.runrecords import code_version, file_sha256, write_json, write_text
+from tools.arguments import add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError
 from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS, SETUPS
@@ -19,7 +20,6 @@ from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, Runner, spec_dict
 from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
 from tools.sim.track_file import get_track
-from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.eval")
 
@@ -41,8 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track", help="override the behavior's track (name or JSON file)")
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
                    help="km/h for every experiment but the speed one (default %(default)s)")
-    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=d.vehicle,
-                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
+    add_vehicle_argument(p, d.vehicle)
     p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "

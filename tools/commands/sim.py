@@ -7,12 +7,11 @@ import logging
 from pathlib import Path
 
 from drive_server.pipeline import DriveConfig
-from tools.arguments import add_speed_unit_argument
+from tools.arguments import add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.errors import CommandError
 from tools.sim.scenario import ScenarioConfig
 from tools.sim.summary import print_summary
-from tools.sim.vehicle import VEHICLE_KINDS
 
 log = logging.getLogger("rbc.sim")
 
@@ -48,8 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="gain of the throttle/brake law for --model, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
     add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
-    p.add_argument("--vehicle", choices=VEHICLE_KINDS, default=d.vehicle,
-                   help="car model: kinematic bicycle, or dynamic single-track with tyre slip (default %(default)s)")
+    add_vehicle_argument(p, d.vehicle)
     p.add_argument("--realtime", action="store_true",
                    help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
     p.add_argument("--control-hz", type=float, default=d.control_hz,
