@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import binascii
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,6 +18,7 @@ import cv2
 import numpy as np
 
 from protocol.errors import ProtocolError
+from protocol.jpeg_header import require_size
 
 FRAME_WIDTH = 320
 FRAME_HEIGHT = 160
@@ -43,25 +45,39 @@ class SteerCommand:
 
 
 def parse_number(value: Any, field: str) -> float:
-    """Parse a telemetry number: a string (``"0.25"``, locale ``"0,25"``, ``"7.8E-05"``) or a number."""
+    """Parse a telemetry number: a string (``"0.25"``, locale ``"0,25"``, ``"7.8E-05"``) or a number.
+
+    Strict on purpose: ASCII decimal only (``float()`` would also take ``"1_000"``, ``"inf"``,
+    Arabic-Indic or full-width digits), at most 64 characters, finite, and within sensible bounds
+    (speed 0..1000, anything else +-1e6), so that no string can become full throttle or an
+    overflow further down.
+    """
+    low, high = (0.0, 1000.0) if field == "speed" else (-1e6, 1e6)
     if isinstance(value, bool):
         raise ProtocolError(f"{field}: expected a number, got a boolean")
-    if isinstance(value, int | float):
+    if isinstance(value, int):
+        if not low <= value <= high:  # compared as int: a 400-digit integer never reaches float()
+            raise ProtocolError(f"{field}: {str(value)[:20]}... is outside [{low:g}, {high:g}]")
         number = float(value)
+    elif isinstance(value, float):
+        number = value
     elif isinstance(value, str):
         text = value.strip()
+        if len(text) > 64:
+            raise ProtocolError(f"{field}: number too long ({len(text)} characters)")
         if "," in text:
             if "." in text:
                 raise ProtocolError(f"{field}: ambiguous number {value!r} (both ',' and '.')")
             text = text.replace(",", ".")
-        try:
-            number = float(text)
-        except ValueError:
-            raise ProtocolError(f"{field}: not a number: {value[:40]!r}") from None
+        if not re.fullmatch(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?", text):
+            raise ProtocolError(f"{field}: not a number: {value[:40]!r}")
+        number = float(text)
     else:
         raise ProtocolError(f"{field}: expected a number or a string, got {type(value).__name__}")
     if not math.isfinite(number):
         raise ProtocolError(f"{field}: not finite: {value!r}")
+    if not low <= number <= high:
+        raise ProtocolError(f"{field}: {number:g} is outside [{low:g}, {high:g}]")
     return number
 
 
@@ -140,6 +156,7 @@ def decode_image(image_b64: str, reduce: int = 1) -> np.ndarray:
         raise ProtocolError(f"image: invalid base64 ({exc})") from None
     if not raw.startswith(_JPEG_MAGIC) and not raw.startswith(b"\x89PNG"):
         raise ProtocolError(f"image: not a JPEG (starts with {raw[:4]!r}, {len(raw)} bytes)")
+    require_size(raw, FRAME_WIDTH, FRAME_HEIGHT)  # refuse a wrong size (a decompression bomb) before decoding
     flags = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
              8: cv2.IMREAD_REDUCED_COLOR_8}
     if reduce not in flags:
