@@ -14,7 +14,9 @@ from pathlib import Path
 
 import cv2
 
+from drive_server import listen
 from drive_server.guard import FallbackPolicy
+from drive_server.limits import WireLimits
 from drive_server.model import InferenceConfig, ModelError, SteeringModel
 from drive_server.models_dir import default_model_path
 from drive_server.pipeline import DriveConfig
@@ -27,8 +29,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="drive_server", description=__doc__.splitlines()[0].split(": ", 1)[1])
     p.add_argument("--model", type=Path, default=None,
                    help="ONNX model (default: the bundled models/pretrained/simplistic.onnx)")
-    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default: localhost only)")
-    p.add_argument("--port", type=int, default=4567, help="port (default 4567, the simulator's; 0 = any free)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="interface to listen on (default: localhost only; IPv6 such as ::1 works; another "
+                        "address exposes the car and its camera to the network, with a warning)")
+    p.add_argument("--port", type=int, default=4567,
+                   help="port, 0..65535 (default 4567, the simulator's; 0 = any free); one owner per port")
     p.add_argument("--speed-limit", type=float, default=25.0, help="v_l of Eq. 14 in km/h (default 25)")
     p.add_argument("--steer-limit", type=float, default=25.0,
                    help="steering limit in degrees: scales the model's -1..1 output and is delta of Eq. 14")
@@ -46,6 +51,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="server processes sharing the port (several simulators at once; WebSocket transport "
                         "only when > 1; POSIX only). Default 1")
     p.add_argument("--ping-interval", type=float, default=25.0, help="seconds between the server's pings (default 25)")
+    p.add_argument("--max-connections", type=int, default=256,
+                   help="open connections at most; then the oldest one still sending its headers is closed, "
+                        "or the new one refused (default 256)")
+    p.add_argument("--header-timeout", type=float, default=10.0,
+                   help="seconds a connection has to send its request headers (default 10)")
+    p.add_argument("--max-pending", type=int, default=64,
+                   help="replies queued for a client that does not read them before it is disconnected "
+                        "(default 64)")
     p.add_argument("--stock-transport", action="store_true",
                    help="disable the WebSocket transport tuning (for comparison benchmarks)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -71,6 +84,10 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--workers must be >= 1 (and 1 where fork is unavailable), got {args.workers}")
         if args.ping_interval < 1:
             raise ValueError(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
+        if not 0 <= args.port <= 65535:
+            raise ValueError(f"--port must be in 0..65535, got {args.port}")
+        WireLimits(max_connections=args.max_connections, header_timeout_s=args.header_timeout,
+                   max_pending_replies=args.max_pending)
     except ValueError as exc:
         return fail(str(exc))
     model_path = args.model
@@ -85,6 +102,12 @@ def main(argv: list[str] | None = None) -> int:
     except ModelError as exc:
         return fail(str(exc))
 
+    # the port too is checked before anything is logged: a port in use is one line, like a bad model
+    try:
+        sock = listen.listening_socket(args.host, args.port)
+    except listen.ListenError as exc:
+        return fail(str(exc))
+
     # one frame at a time: OpenCV's worker threads only add wake-up latency to a 160x80 resize
     cv2.setNumThreads(1)
     # imported only now: the model check above must not pay for (or print anything from) eventlet
@@ -94,30 +117,25 @@ def main(argv: list[str] | None = None) -> int:
 
     tuning = TransportTuning.stock() if args.stock_transport else TransportTuning()
     config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
-                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval)
+                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval,
+                          max_connections=args.max_connections, header_timeout_s=args.header_timeout,
+                          max_pending_replies=args.max_pending)
     log.info("model %s", model.describe())
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s",
              drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value)
+    if not listen.is_local(sock.getsockname()[0]):
+        log.warning(listen.EXPOSED_WARNING, listen.url(sock).removeprefix("http://"))
     if args.workers > 1:
-        from drive_server.workers import listening_socket, serve_workers
-
-        try:
-            sock = listening_socket(args.host, args.port)
-        except OSError as exc:
-            return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
+        from drive_server.workers import serve_workers
 
         def make_server(worker_config: ServerConfig) -> DriveServer:  # runs in each worker, after the fork
             return DriveServer(DrivePipeline(SteeringModel(model_path, inference), drive), worker_config)
 
         return serve_workers(args.workers, sock, model, config, make_server, tuning)
     server = DriveServer(DrivePipeline(model, drive), config)
-    try:
-        server.bind()
-    except OSError as exc:
-        return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
+    server.adopt(sock)
     server.serve()
     return 0
-
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -1,0 +1,427 @@
+"""The server's limits, enforced before work is done: no client can stall, starve or exhaust the server.
+
+What the libraries leave open, and what this module closes (each item of issue #10 in brackets):
+
+- Connections [8]: eventlet's WSGI server has no header timeout and queues connection 1,025 forever
+  behind 1,024 half-open ones. ``protocol_class`` gives every connection ``header_timeout_s`` to send
+  its request line and headers, caps the number of connections, and when the cap is reached closes the
+  oldest connection still sending its headers (a half-open flood cannot keep clients out) or, if
+  there is none, refuses the new one with a 503 and one log line.
+- Long-polling bodies [1]: engine.io answers an oversized POST by closing the session with
+  ``wait=True``, which waits forever for a poll the client never sends (greenthread and socket kept,
+  CLOSE_WAIT). ``polling_gate`` answers 413 from the Content-Length alone, before reading the body,
+  and frees the connection; it also bounds the time to send the body and checks its packets.
+- WebSocket messages [3]: eventlet checks each frame against ``max_frame_length`` but buffers any
+  number of continuation frames. ``limited_message_class`` bounds the whole message while it arrives.
+- Packets [5, 6, 7]: engine.io turns an empty or non-numeric text packet into an exception that ends up
+  as an HTTP 500 written into the upgraded stream, and json-decodes some packets with unbounded depth
+  (RecursionError). ``packet_problem`` refuses, before any library parses it, what no Socket.IO client
+  sends; the connection is then closed with a close frame (1002).
+- Fairness [4]: with ``async_handlers=False`` a reader whose socket always has data never yields to
+  the event loop. The WebSocket reader yields after every message (one message per connection per turn).
+
+Everything here is logged through ``FaultLog``: one line per kind of fault and interval, counted.
+eventlet is imported only inside the functions that need it, so the CLI can check options and the
+model before paying for (or printing anything from) eventlet.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import re
+import socket
+import struct
+import sys
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from time import monotonic
+from typing import Any
+from urllib.parse import parse_qs
+
+from drive_server.stats import FaultCounters
+
+if sys.platform.startswith("linux"):
+    import fcntl
+    import termios
+
+    _TIOCOUTQ: int | None = termios.TIOCOUTQ
+else:  # pragma: no cover
+    _TIOCOUTQ = None
+
+log = logging.getLogger(__name__)
+
+#: Deepest JSON nesting accepted in a Socket.IO packet (a telemetry is 2 deep).
+MAX_JSON_DEPTH = 32
+#: Longest run of number characters outside strings (a telemetry sends numbers as strings).
+MAX_NUMBER_CHARS = 64
+#: Most JSON structure outside strings (a telemetry has ~40 characters of it).
+MAX_SKELETON_CHARS = 4096
+#: Engine.IO packets the client may send besides a message (``4...``): close, ping, pong, upgrade, noop.
+_CONTROL_PACKETS = frozenset(["1", "2", "3", "2probe", "3probe", "5", "6"])
+_NUMBER_RUN = re.compile(r"[0-9.eE+-]{" + str(MAX_NUMBER_CHARS + 1) + ",}")
+_BRACKETS = re.compile(r"[\[\]{}]")
+_STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"')
+#: A Socket.IO EVENT packet (optionally with an ack id) whose event is ``telemetry``.
+TELEMETRY_EVENT = re.compile(r'2[0-9]*\["telemetry"')
+#: Bytes the kernel may hold unsent for one connection before its client counts as not reading. Replies
+#: are ~70 bytes and a simulator has two in flight; the auto-tuned send buffer (MBs) would otherwise let
+#: a client that never reads be served ~100,000 frames before the pending-reply queue starts to grow.
+MAX_UNSENT_BYTES = 64 * 1024
+#: WebSocket close code for a protocol error (RFC 6455 section 7.4.1).
+CLOSE_PROTOCOL_ERROR = 1002
+
+
+@dataclass(frozen=True)
+class WireLimits:
+    """Limits of one server (``--max-connections``, ``--header-timeout``, ``--max-pending``, message size)."""
+
+    max_message_bytes: int = 256 * 1024
+    max_connections: int = 256
+    header_timeout_s: float = 10.0
+    max_pending_replies: int = 64
+
+    def __post_init__(self) -> None:
+        if self.max_message_bytes < 1024:
+            raise ValueError(f"the message size limit must be >= 1024 bytes, got {self.max_message_bytes}")
+        if self.max_connections < 1:
+            raise ValueError(f"--max-connections must be >= 1, got {self.max_connections}")
+        if not self.header_timeout_s > 0:
+            raise ValueError(f"--header-timeout must be > 0 s, got {self.header_timeout_s}")
+        if self.max_pending_replies < 2:  # the simulator keeps two frames in flight
+            raise ValueError(f"--max-pending must be >= 2, got {self.max_pending_replies}")
+
+
+class FaultLog:
+    """One warning line per kind of fault per ``interval_s`` (the rest counted, and said on the next line).
+
+    Why: input a client can send must never flood the log (one "46" once meant 4,000 tracebacks).
+    Every fault is counted in ``counters`` whether or not its line is written.
+    """
+
+    def __init__(self, counters: FaultCounters, interval_s: float = 5.0) -> None:
+        self.counters = counters
+        self.interval_s = interval_s
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+    def report(self, kind: str, message: str, *args: Any, count: bool = True) -> None:
+        """Log ``message % args`` unless a line of this kind was written less than ``interval_s`` ago;
+        ``count=False`` for faults counted elsewhere (per client)."""
+        if count:
+            self.counters.add(kind)
+        now = monotonic()
+        if now - self._last.get(kind, -1e18) < self.interval_s:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        self._last[kind] = now
+        more = self._suppressed.pop(kind, 0)
+        log.warning(message + (f" [{more} more like it not logged]" if more else ""), *args)
+
+
+# -- packets -------------------------------------------------------------------------------------
+def json_problem(text: str) -> str | None:
+    """Why the JSON in ``text`` is too deep or has an oversized number, or None. Cheap: strings (the
+    base64 image) are cut out first, so only the few characters of structure are looked at."""
+    if "\\" in text:
+        skeleton = _STRING.sub('""', text)
+    else:
+        parts = text.split('"')
+        if len(parts) % 2 == 0:
+            return "unterminated JSON string"
+        skeleton = "".join(parts[0::2])
+    if len(skeleton) > MAX_SKELETON_CHARS:
+        return f"too much JSON structure ({len(skeleton)} characters outside strings)"
+    if _NUMBER_RUN.search(skeleton):
+        return f"a JSON number longer than {MAX_NUMBER_CHARS} characters"
+    depth = deepest = 0
+    for match in _BRACKETS.finditer(skeleton):
+        depth += 1 if match.group() in "[{" else -1
+        deepest = max(deepest, depth)
+    if deepest > MAX_JSON_DEPTH:
+        return f"JSON nested {deepest} deep (at most {MAX_JSON_DEPTH})"
+    return None
+
+
+def packet_problem(data: str | bytes) -> str | None:
+    """Why an Engine.IO packet from a client is refused before any library parses it, or None.
+
+    Accepted: a message ``4`` carrying a Socket.IO packet of type 0-3 (CONNECT, DISCONNECT, EVENT, ACK),
+    and the control packets close, ping, pong, upgrade, noop. Everything else is a protocol error:
+    binary data (the simulator protocol has none), empty or non-numeric text, Socket.IO binary packets
+    (``45``/``46`` once made every later frame on the connection wait for attachments that never came).
+    Depth and number size of the JSON are checked separately (``json_problem``), since a bad telemetry
+    is still answered.
+    """
+    if not isinstance(data, str):
+        return "binary frame (the simulator protocol has none)"
+    if not data:
+        return "empty packet"
+    if data[0] != "4":
+        return None if data in _CONTROL_PACKETS else f"not an Engine.IO packet: {data[:20]!r}"
+    kind = data[1:2]
+    if kind in ("0", "1", "2", "3"):
+        return None
+    if kind in ("5", "6"):
+        return "Socket.IO binary packet (the simulator protocol has none)"
+    return f"not a Socket.IO packet: {data[:20]!r}"
+
+
+# -- WebSocket -------------------------------------------------------------------------------------
+def limited_message_class(base: type, limit: int, on_too_large: Callable[[int], None]) -> type:
+    """eventlet's ``RFC6455WebSocket.Message`` with a bound on the WHOLE message, fragments included.
+
+    eventlet checks each frame's length, then joins any number of continuation frames (256 MiB in 200 KiB
+    fragments used to be buffered whole). ``push`` is called for every received chunk, so the bound holds
+    while the message arrives, at most one recv chunk past it.
+    """
+    from eventlet.websocket import FailedConnectionError
+
+    class LimitedMessage(base):  # type: ignore[misc, valid-type]
+        size = 0
+
+        def push(self, data: bytes, final: bool = False) -> None:
+            self.size += len(data)
+            if self.size > limit:
+                on_too_large(self.size)
+                raise FailedConnectionError(1009, f"message larger than {limit} bytes")
+            super().push(data, final=final)
+
+    return LimitedMessage
+
+
+def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str) -> None:
+    """Apply the per-connection limits to one eventlet ``RFC6455WebSocket`` (instance attributes only)."""
+    ws.Message = limited_message_class(
+        type(ws).Message, limits.max_message_bytes,
+        lambda size: faults.report("message_too_large", "%s: WebSocket message of %d+ bytes (limit %d): closed",
+                                   peer, size, limits.max_message_bytes))
+    import eventlet
+
+    stock_wait = ws.wait
+
+    def wait() -> Any:
+        # one message per connection per turn of the event loop: a client whose socket always has data
+        # (a flood) must not keep the loop from the other clients' readers and writers
+        eventlet.sleep(0)
+        data = stock_wait()
+        if data is None:
+            return None
+        problem = packet_problem(data)
+        if problem is not None:
+            faults.report("protocol_error", "%s: protocol error (%s): connection closed", peer, problem)
+            ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, problem[:100]))
+            return None  # engine.io then ends the session as if the client had closed it
+        return data
+
+    ws.wait = wait
+
+
+def websocket_gate_supported() -> tuple[bool, str]:
+    """Whether eventlet's frame parser builds messages through ``self.Message`` (the total-size bound)."""
+    import inspect
+
+    from eventlet.websocket import RFC6455WebSocket
+
+    try:
+        source = inspect.getsource(RFC6455WebSocket._recv_frame)
+    except (OSError, TypeError):
+        return False, "cannot read RFC6455WebSocket._recv_frame"
+    if "self.Message(" not in source or not hasattr(RFC6455WebSocket.Message, "push"):
+        return False, "RFC6455WebSocket._recv_frame does not build messages through self.Message"
+    return True, ""
+
+
+def limited_websocket_class(base: type, limits: WireLimits, faults: FaultLog) -> type:
+    """A subclass of engine.io's eventlet ``WebSocketWSGI`` that guards every connection it upgrades."""
+    from eventlet.websocket import RFC6455WebSocket
+
+    ok, why = websocket_gate_supported()
+    if not ok:
+        log.warning("WebSocket messages bounded only after reassembly (%s)", why)
+
+    class LimitedWebSocketWSGI(base):  # type: ignore[misc, valid-type]
+        def _handle_hybi_request(self, environ: dict[str, Any]) -> Any:
+            ws = super()._handle_hybi_request(environ)
+            if isinstance(ws, RFC6455WebSocket):
+                peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
+                if ok:
+                    guard_websocket(ws, limits, faults, peer)
+                environ["rbc.websocket"] = ws  # lets the server close this connection with a close frame
+            return ws
+
+    return LimitedWebSocketWSGI
+
+
+# -- long-polling ------------------------------------------------------------------------------------
+def _raw_response(environ: dict[str, Any], status: str, body: bytes) -> list[bytes]:
+    """Write a complete response with ``Connection: close`` directly and tell eventlet it is handled.
+
+    Why not ``start_response``: after a normal response eventlet reads and discards the unread request
+    body to keep the connection alive, which waits forever on a client that sent only the header.
+    ``WSGI_LOCAL.already_handled`` (what eventlet's own WebSocket uses) makes it close the connection.
+    """
+    import eventlet.wsgi
+
+    sock = environ["eventlet.input"].get_socket()
+    with contextlib.suppress(OSError):
+        sock.sendall(f"HTTP/1.1 {status}\r\nContent-Type: text/plain\r\nContent-Length: {len(body)}\r\n"
+                     "Connection: close\r\n\r\n".encode("latin-1") + body)
+    eventlet.wsgi.WSGI_LOCAL.already_handled = True
+    return []
+
+
+def polling_gate(app: Callable, eio_server: Any, limits: WireLimits, faults: FaultLog) -> Callable:
+    """WSGI middleware: refuse an Engine.IO long-polling POST before engine.io reads it.
+
+    Oversized (from Content-Length alone) -> 413, chunked -> 411, body not sent within the header
+    timeout or packets that fail ``packet_problem``/``json_problem`` -> 400; each time the session is
+    closed without waiting and the connection is freed.
+    """
+
+    import eventlet
+
+    def close_session(environ: dict[str, Any]) -> None:
+        sid = parse_qs(environ.get("QUERY_STRING", "")).get("sid", [None])[0]
+        session = eio_server.sockets.get(sid) if sid else None
+        if session is not None and not session.closed:
+            session.close(wait=False, abort=False)  # wait=True would wait for a poll that may never come
+
+    def gate(environ: dict[str, Any], start_response: Callable) -> Any:
+        if environ.get("REQUEST_METHOD") != "POST" or "eventlet.input" not in environ:
+            return app(environ, start_response)
+        peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
+        if "chunked" in environ.get("HTTP_TRANSFER_ENCODING", "").lower():
+            faults.report("protocol_error", "%s: chunked long-polling POST refused (411)", peer)
+            close_session(environ)
+            return _raw_response(environ, "411 Length Required", b"Content-Length required")
+        try:
+            length = int(environ.get("CONTENT_LENGTH") or 0)
+        except ValueError:
+            length = -1
+        if not 0 <= length <= limits.max_message_bytes:
+            faults.report("message_too_large", "%s: long-polling POST of %s bytes (limit %d): refused (413)",
+                          peer, environ.get("CONTENT_LENGTH"), limits.max_message_bytes)
+            close_session(environ)
+            return _raw_response(environ, "413 Payload Too Large", b"payload too large")
+        try:
+            with eventlet.Timeout(limits.header_timeout_s):
+                body = environ["wsgi.input"].read(length)
+        except eventlet.Timeout:
+            faults.report("header_timeout", "%s: long-polling body not sent within %.0f s: closed",
+                          peer, limits.header_timeout_s)
+            close_session(environ)
+            return _raw_response(environ, "408 Request Timeout", b"")
+        text = body.decode("utf-8", errors="replace")
+        problem = next(filter(None, (packet_problem(p) or (json_problem(p) if p[:2] == "40" else None)
+                                     for p in text.split("\x1e"))), None)
+        if problem is not None:
+            faults.report("protocol_error", "%s: protocol error (%s): session closed", peer, problem)
+            close_session(environ)
+            return _raw_response(environ, "400 Bad Request", problem.encode())
+        environ["wsgi.input"] = io.BytesIO(body)
+        return app(environ, start_response)
+
+    return gate
+
+
+# -- connections ---------------------------------------------------------------------------------------
+class ConnectionLimiter:
+    """Counts the open connections and remembers which of them are still sending their headers."""
+
+    def __init__(self, limits: WireLimits, faults: FaultLog) -> None:
+        self.limits = limits
+        self.faults = faults
+        self.open = 0
+        self.waiting: OrderedDict[int, Any] = OrderedDict()  # id(protocol) -> socket, oldest first
+
+    def admit(self, peer: str) -> bool:
+        """Whether a new connection may be served; at the cap, the oldest connection still sending its
+        headers is closed to make room (its own greenthread then ends and gives its slot back)."""
+        if self.open >= self.limits.max_connections:
+            if not self.waiting:
+                self.faults.report("refused", "connection limit (%d, --max-connections) reached: refused %s",
+                                   self.limits.max_connections, peer)
+                return False
+            _, sock = self.waiting.popitem(last=False)
+            self.faults.report("evicted", "connection limit (%d) reached: closed the oldest connection still "
+                               "sending its headers to admit %s", self.limits.max_connections, peer)
+            shutdown_socket(sock)  # its blocked read returns EOF
+        self.open += 1
+        return True
+
+
+def protocol_class(limiter: ConnectionLimiter) -> type:
+    """eventlet's ``HttpProtocol`` with the connection cap and the header timeout of ``limiter``."""
+    import eventlet
+    import eventlet.wsgi
+
+    limits, faults = limiter.limits, limiter.faults
+
+    class LimitedProtocol(eventlet.wsgi.HttpProtocol):
+        _timer: Any = None
+
+        def handle(self) -> None:
+            address = self.client_address
+            peer = f"{address[0]}:{address[1]}" if isinstance(address, tuple) else str(address)
+            if not limiter.admit(peer):
+                with contextlib.suppress(OSError):
+                    self.connection.sendall(b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\n"
+                                            b"Retry-After: 5\r\nContent-Length: 0\r\n\r\n")
+                self.close_connection = 1
+                return
+            try:
+                super().handle()
+            finally:
+                limiter.waiting.pop(id(self), None)
+                limiter.open -= 1
+
+        def handle_one_request(self) -> None:
+            """One request; the request line and headers must arrive within ``header_timeout_s`` (an idle
+            keep-alive connection waiting for its next request is closed after that time, too)."""
+            limiter.waiting[id(self)] = self.connection
+            self._timer = timer = eventlet.Timeout(limits.header_timeout_s)
+            try:
+                super().handle_one_request()
+            except eventlet.Timeout as exc:
+                if exc is not timer:
+                    raise
+                faults.report("header_timeout", "%s: no complete request within %.0f s (--header-timeout): closed",
+                              self.client_address[0], limits.header_timeout_s)
+                self.close_connection = 1
+            except OSError:  # a connection error of one client is no reason for a traceback
+                self.close_connection = 1
+            finally:
+                self._end_header_phase()
+
+        def handle_one_response(self) -> None:
+            self._end_header_phase()  # the response (a long poll, a whole WebSocket session) has no deadline
+            super().handle_one_response()
+
+        def _end_header_phase(self) -> None:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            limiter.waiting.pop(id(self), None)
+
+    return LimitedProtocol
+
+
+def unsent_bytes(sock: Any) -> int:
+    """Bytes queued in the kernel for ``sock`` and not yet sent or acknowledged (Linux ``SIOCOUTQ``; 0 where
+    the platform cannot tell, which leaves the pending-reply queue as the only signal)."""
+    if _TIOCOUTQ is None:
+        return 0
+    try:
+        return struct.unpack("i", fcntl.ioctl(sock.fileno(), _TIOCOUTQ, b"\0\0\0\0"))[0]
+    except (OSError, ValueError):
+        return 0
+
+
+def shutdown_socket(sock: Any) -> None:
+    """Close a connection at once, both ways (a client that does not read its replies gets no close frame:
+    the send would block behind the replies it never read)."""
+    with contextlib.suppress(OSError):
+        sock.shutdown(socket.SHUT_RDWR)
