@@ -8,6 +8,7 @@ simulator sends its next frame only after a reply. Each connected simulator has 
 
 from __future__ import annotations
 
+import gc
 import json
 import logging
 import signal
@@ -389,6 +390,9 @@ class DriveServer:
         if self.config.log_every_s > 0:
             self.sio.start_background_task(self._log_loop)
         previous = {s: signal.signal(s, self.stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        # everything loaded so far (modules, ONNX Runtime, eventlet) lives as long as the server: moved out of
+        # the collector's reach, a full collection no longer walks it between two frames (a multi-ms pause)
+        gc.freeze()
         if announce:
             log.info("listening on %s", listen.url(sock))
         try:

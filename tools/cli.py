@@ -32,6 +32,7 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
     Subcommand("eval", "tools.evaluate.cli", "run the paper's robustness experiments on a model (Table 9)"),
     Subcommand("compare", "tools.evaluate.compare", "side-by-side comparison of models (Table 10)"),
     Subcommand("bench", "tools.bench", "round-trip latency benchmark of drive_server over the Unity wire"),
+    Subcommand("fuzz", "tools.fuzz", "hostile-client campaign against drive_server; healthy latency beside it"),
     Subcommand("replay", "tools.replay", "replay a driving log to a drive server as the Unity simulator would"),
     Subcommand("sim-bench", "tools.sim.bench", "frames/s of the headless renderer and lap wall time"),
     Subcommand("train-bench", "models.bench", "augmentation and training throughput; projected paper run", "train"),
