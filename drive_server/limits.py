@@ -170,6 +170,12 @@ def packet_problem(data: str | bytes) -> str | None:
 
 
 # -- WebSocket -------------------------------------------------------------------------------------
+def close_reason(text: str) -> str:
+    """``text`` cut to what a close frame can carry (control frames hold at most 125 bytes)."""
+    return text.encode("utf-8")[:100].decode("utf-8", errors="ignore")
+
+
+
 def limited_message_class(base: type, limit: int, on_too_large: Callable[[int], None]) -> type:
     """eventlet's ``RFC6455WebSocket.Message`` with a bound on the WHOLE message, fragments included.
 
@@ -212,7 +218,7 @@ def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str) ->
         problem = packet_problem(data)
         if problem is not None:
             faults.report("protocol_error", "%s: protocol error (%s): connection closed", peer, problem)
-            ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, problem[:100]))
+            ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, close_reason(problem)))
             return None  # engine.io then ends the session as if the client had closed it
         return data
 
@@ -277,7 +283,7 @@ def polling_gate(app: Callable, eio_server: Any, limits: WireLimits, faults: Fau
     """WSGI middleware: refuse an Engine.IO long-polling POST before engine.io reads it.
 
     Oversized (from Content-Length alone) -> 413, chunked -> 411, body not sent within the header
-    timeout or packets that fail ``packet_problem``/``json_problem`` -> 400; each time the session is
+    timeout or packets that fail ``packet_problem`` -> 400; each time the session is
     closed without waiting and the connection is freed.
     """
 
@@ -315,8 +321,7 @@ def polling_gate(app: Callable, eio_server: Any, limits: WireLimits, faults: Fau
             close_session(environ)
             return _raw_response(environ, "408 Request Timeout", b"")
         text = body.decode("utf-8", errors="replace")
-        problem = next(filter(None, (packet_problem(p) or (json_problem(p) if p[:2] == "40" else None)
-                                     for p in text.split("\x1e"))), None)
+        problem = next(filter(None, map(packet_problem, text.split("\x1e"))), None)
         if problem is not None:
             faults.report("protocol_error", "%s: protocol error (%s): session closed", peer, problem)
             close_session(environ)

@@ -22,11 +22,13 @@ from typing import Any
 from drive_server import listen
 from drive_server.guard import FallbackPolicy, FrameGuard
 from drive_server.limits import (
+    CLOSE_PROTOCOL_ERROR,
     MAX_UNSENT_BYTES,
     TELEMETRY_EVENT,
     ConnectionLimiter,
     FaultLog,
     WireLimits,
+    close_reason,
     json_problem,
     limited_websocket_class,
     polling_gate,
@@ -312,7 +314,7 @@ class DriveServer:
             if hard:
                 shutdown_socket(ws.socket)
             else:
-                ws._send_closing_frame(True, close_data=(1002, reason[:100]))
+                ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, close_reason(reason)))
         session = self.sio.eio.sockets.get(eio_sid)
         if session is not None and not session.closed:
             session.close(wait=False, abort=ws is not None)  # wait=True could wait forever for a poll
