@@ -303,7 +303,7 @@ class DriveServer:
         self._fallback(self._client(sid), kind, reason)
 
     def _on_protocol_error(self, eio_sid: str, reason: str) -> None:
-        self.fault_log.report("protocol_error", "client %s: protocol error (%s): connection closed", eio_sid, reason)
+        self.fault_log.report("protocol_error", "connection %s: protocol error (%s): closed", eio_sid, reason)
         self._close(eio_sid, reason)
 
     def _close(self, eio_sid: str, reason: str, hard: bool = False) -> None:
