@@ -57,8 +57,8 @@ log = logging.getLogger(__name__)
 MAX_JSON_DEPTH = 32
 #: Longest run of number characters outside strings (a telemetry sends numbers as strings).
 MAX_NUMBER_CHARS = 64
-#: Most JSON structure outside strings (a telemetry has ~40 characters of it).
-MAX_SKELETON_CHARS = 4096
+#: Most JSON structure outside strings (a telemetry has ~40 characters of it; the bound keeps the depth scan short).
+MAX_SKELETON_CHARS = 1024
 #: Engine.IO packets the client may send besides a message (``4...``): close, ping, pong, upgrade, noop.
 _CONTROL_PACKETS = frozenset(["1", "2", "3", "2probe", "3probe", "5", "6"])
 _NUMBER_RUN = re.compile(r"[0-9.eE+-]{" + str(MAX_NUMBER_CHARS + 1) + ",}")

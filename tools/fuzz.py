@@ -8,8 +8,9 @@ garbage text, empty and binary frames, oversized or fragmented messages). Every 
 exactly once, in order, and every good frame with the same command as on a clean connection; a protocol
 error must close its connection with a close frame.
 
-Phase 2 (fairness): ``--healthy`` clients at 30 Hz alone, then beside two misbehaving clients (one writes
-telemetries without reading its replies, one fuzzes as fast as it can), in separate processes.
+Phase 2 (fairness): ``--healthy`` clients at 30 Hz, alone and beside two misbehaving clients (one writes
+telemetries without reading its replies, one fuzzes as fast as it can), in separate processes; the two
+conditions alternate every 2 s so that a shared machine's background load weighs on both alike.
 
 Prints sent, answered, closes, crashes, double or missing answers, wrong commands, the server's RSS and
 open file descriptors before and after (a started server only, from /proc), and round-trip percentiles.
@@ -54,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--server-args", default="", help="extra drive_server arguments, e.g. \"--max-pending 32\"")
     p.add_argument("--telemetries", type=int, default=100_000, help="telemetries of the campaign (default 100,000)")
     p.add_argument("--healthy", type=int, default=8, help="healthy 30 Hz clients in the fairness phase (default 8)")
-    p.add_argument("--duration", type=float, default=20.0, help="seconds of each fairness measurement (default 20)")
+    p.add_argument("--duration", type=float, default=20.0,
+                   help="seconds of each fairness condition, interleaved in 2 s phases (default 20)")
     p.add_argument("--no-nice", action="store_true",
                    help="run the misbehaving clients at normal priority (by default they are niced +10, standing "
                         "in for clients on other machines, so they do not steal the healthy clients' CPU here)")
@@ -211,7 +213,8 @@ def campaign(url: str, frames: list[Frame], reference: list[SteerCommand], total
 
 # -- phase 2 -------------------------------------------------------------------------------------------
 def _healthy(url: str, payload: dict[str, str], n: int, duration: float, out: Any) -> None:
-    rtts: list[float] = []
+    """``n`` closed-loop clients at 30 Hz for ``duration`` s; puts [(time.monotonic() sent, round trip s)]."""
+    samples: list[tuple[float, float]] = []
     lock = threading.Lock()
 
     def one() -> None:
@@ -221,18 +224,19 @@ def _healthy(url: str, payload: dict[str, str], n: int, duration: float, out: An
             t_next = time.perf_counter()
             end = t_next + duration
             while t_next < end:
-                mine.append(client.exchange(payload)[1])
+                sent = time.monotonic()
+                mine.append((sent, client.exchange(payload)[1]))
                 t_next += 1 / 30
                 time.sleep(max(0.0, t_next - time.perf_counter()))
         with lock:
-            rtts.extend(mine)
+            samples.extend(mine)
 
     pool = [threading.Thread(target=one) for _ in range(n)]
     for t in pool:
         t.start()
     for t in pool:
         t.join()
-    out.put(rtts)
+    out.put(samples)
 
 
 def _flooder(url: str, stop: Any, nice: bool) -> None:
@@ -264,28 +268,50 @@ def _fuzzer(url: str, frames: list[Frame], reference: list[SteerCommand], stop: 
             time.sleep(0.05)
 
 
+def _percentiles(rtts_s: list[float]) -> dict[str, float]:
+    ms = np.asarray(rtts_s) * 1e3
+    return {"frames": int(len(ms)), "p50_ms": round(float(np.percentile(ms, 50)), 3),
+            "p99_ms": round(float(np.percentile(ms, 99)), 3), "max_ms": round(float(ms.max()), 3)}
+
+
 def fairness(url: str, frames: list[Frame], reference: list[SteerCommand], healthy: int, duration: float,
-             misbehaving: bool, nice: bool, seed: int) -> dict[str, float]:
+             nice: bool, seed: int, phase_s: float = 2.0, settle_s: float = 0.3) -> tuple[dict, dict]:
+    """Healthy clients' round trips alone and beside two misbehaving clients, as (alone, beside).
+
+    Why interleaved: on a shared machine the background load drifts over a measurement. The healthy
+    clients run throughout while the misbehaving pair is started and killed every ``phase_s``; each
+    round trip is attributed to the phase it started in (the first ``settle_s`` of a phase is left out),
+    so both conditions see the same background. ``duration`` is the time spent in each condition.
+    """
     ctx = mp.get_context("fork")
-    stop, out = ctx.Event(), ctx.Queue()
-    bad = []
-    if misbehaving:
-        bad = [ctx.Process(target=_flooder, args=(url, stop, nice), daemon=True),
-               ctx.Process(target=_fuzzer, args=(url, frames, reference, stop, nice, seed), daemon=True)]
-        for p in bad:
-            p.start()
-        time.sleep(1.0)  # both are at it before the measurement starts
-    proc = ctx.Process(target=_healthy, args=(url, frames[0].payload(), healthy, duration, out))
+    out = ctx.Queue()
+    phases = max(1, round(duration / phase_s))
+    proc = ctx.Process(target=_healthy, args=(url, frames[0].payload(), healthy, 2 * phases * phase_s + 1.0, out))
     proc.start()
-    rtts = np.asarray(out.get(timeout=duration + 120)) * 1e3
+    time.sleep(1.0)  # the healthy clients are connected and at their pace
+    windows: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    for k in range(2 * phases):
+        misbehaving = k % 2 == 1
+        t0 = time.monotonic()
+        bad = []
+        if misbehaving:
+            stop = ctx.Event()
+            bad = [ctx.Process(target=_flooder, args=(url, stop, nice), daemon=True),
+                   ctx.Process(target=_fuzzer, args=(url, frames, reference, stop, nice, seed + k), daemon=True)]
+            for p in bad:
+                p.start()
+        time.sleep(max(0.0, t0 + phase_s - time.monotonic()))
+        windows[misbehaving].append((t0 + settle_s, time.monotonic()))
+        for p in bad:
+            p.kill()  # at once, as a client that vanishes: the server sees its connections end
+            p.join()
+    samples = out.get(timeout=2 * phases * phase_s + 120)
     proc.join()
-    stop.set()
-    for p in bad:
-        p.join(5)
-        if p.is_alive():
-            p.kill()
-    return {"frames": int(len(rtts)), "p50_ms": round(float(np.percentile(rtts, 50)), 3),
-            "p99_ms": round(float(np.percentile(rtts, 99)), 3), "max_ms": round(float(rtts.max()), 3)}
+
+    def within(kind: bool) -> list[float]:
+        return [rtt for sent, rtt in samples if any(a <= sent < b for a, b in windows[kind])]
+
+    return _percentiles(within(False)), _percentiles(within(True))
 
 
 # -- measuring the server -----------------------------------------------------------------------------
@@ -349,13 +375,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"server after the campaign: RSS {rss1} MiB ({rss1 - rss0:+.1f} MiB), {fds1} open fds "
                   f"(baseline {fds0})")
         nice = not args.no_nice
-        alone = fairness(url, frames, reference, args.healthy, args.duration, False, nice, args.seed)
+        alone, beside = fairness(url, frames, reference, args.healthy, args.duration, nice, args.seed)
         print(f"{args.healthy} healthy 30 Hz clients alone: round trip p50 {alone['p50_ms']} ms, p99 "
               f"{alone['p99_ms']} ms, max {alone['max_ms']} ms ({alone['frames']} frames)")
-        beside = fairness(url, frames, reference, args.healthy, args.duration, True, nice, args.seed + 1)
         print(f"{args.healthy} healthy 30 Hz clients beside 2 misbehaving ones{'' if nice else ' (not niced)'}: "
               f"round trip p50 {beside['p50_ms']} ms, p99 {beside['p99_ms']} ms, max {beside['max_ms']} ms "
-              f"({beside['frames']} frames)")
+              f"({beside['frames']} frames; the two conditions interleaved every 2 s)")
         rss2, fds2 = _rss_mib(pid), _settled_fds(pid, fds0)
         if rss0 is not None:
             print(f"server after everything: RSS {rss2} MiB ({rss2 - rss0:+.1f} MiB), {fds2} open fds "
