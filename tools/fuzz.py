@@ -398,7 +398,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if server is not None:
             server.stop()
-            tail = [ln for ln in server.log().splitlines() if "stopped:" in ln]
+            text = server.log()
+            tail = [ln for ln in text.splitlines() if "stopped:" in ln]
             if tail:
                 print("server:", tail[-1].split("stopped: ", 1)[1])
+            print(f"server log: {len(text.encode()):,} bytes, {text.count(chr(10)):,} lines, "
+                  f"{text.count('Traceback')} tracebacks")
             server.cleanup()
