@@ -425,8 +425,15 @@ def unsent_bytes(sock: Any) -> int:
         return 0
 
 
-def shutdown_socket(sock: Any) -> None:
-    """Close a connection at once, both ways (a client that does not read its replies gets no close frame:
-    the send would block behind the replies it never read)."""
+def shutdown_socket(sock: Any, reset: bool = False) -> None:
+    """Close a connection at once, both ways; its blocked reader sees EOF and its writer an error.
+
+    ``reset`` (a client that does not read its replies): ``SO_LINGER`` 0 makes the final close send a
+    TCP reset and drop the unsent replies. A plain close would leave the kernel holding them behind a
+    FIN the client never reads up to, and the client, blocked writing into a window that never opens,
+    would not learn about it until its own timeout (no close frame either: it could not be sent).
+    """
     with contextlib.suppress(OSError):
+        if reset:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
         sock.shutdown(socket.SHUT_RDWR)

@@ -307,12 +307,12 @@ class DriveServer:
         self._close(eio_sid, reason)
 
     def _close(self, eio_sid: str, reason: str, hard: bool = False) -> None:
-        """Close one connection now: a WebSocket close frame 1002 (``hard``: shut the socket down, for a
-        client whose unread replies block any further send), then end the session without waiting."""
+        """Close one connection now: a WebSocket close frame 1002 (``hard``: a TCP reset, for a client whose
+        unread replies block any further send), then end the session without waiting."""
         ws = self.sio.environ.get(eio_sid, {}).get("rbc.websocket")
         if ws is not None:
             if hard:
-                shutdown_socket(ws.socket)
+                shutdown_socket(ws.socket, reset=True)
             else:
                 ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, close_reason(reason)))
         session = self.sio.eio.sockets.get(eio_sid)
