@@ -14,11 +14,14 @@ from pathlib import Path
 
 import cv2
 
+from drive_server import listen
 from drive_server.guard import FallbackPolicy
 from drive_server.helpformat import DefaultsHelpFormatter
+from drive_server.limits import WireLimits
 from drive_server.model import InferenceConfig, ModelError, SteeringModel
 from drive_server.models_dir import default_model_path
 from drive_server.pipeline import DriveConfig
+from drive_server.server_config import ServerConfig
 from protocol import SpeedUnit
 
 log = logging.getLogger("drive_server")
@@ -29,8 +32,12 @@ def build_parser() -> argparse.ArgumentParser:
                                 formatter_class=DefaultsHelpFormatter)
     p.add_argument("--model", type=Path, default=None,
                    help="ONNX model (default: the bundled models/pretrained/simplistic.onnx)")
-    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default: localhost only)")
-    p.add_argument("--port", type=int, default=4567, help="port (default 4567, the simulator's; 0 = any free)")
+    server = ServerConfig  # the defaults, defined once
+    p.add_argument("--host", default=server.host,
+                   help="interface to listen on (default: localhost only; IPv6 such as ::1 works; another "
+                        "address exposes the car and its camera to the network, with a warning)")
+    p.add_argument("--port", type=int, default=server.port,
+                   help="port, 0..65535 (default 4567, the simulator's; 0 = any free); one owner per port")
     drive, inference, fallback = DriveConfig, InferenceConfig, FallbackPolicy  # the defaults, defined once
     p.add_argument("--speed-limit", type=float, default=drive.speed_limit_kmh,
                    help="speed limit in km/h of the throttle/brake control law "
@@ -48,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--provider", default=inference.provider,
                    help="ONNX Runtime execution provider (default %(default)s)")
     p.add_argument("--stats-json", type=Path, default=None, help="write latency statistics here at exit")
-    p.add_argument("--log-every", type=float, default=10.0,
+    p.add_argument("--log-every", type=float, default=server.log_every_s,
                    help="seconds between one-line latency summaries (0: only at exit)")
     p.add_argument("--hold-frames", type=int, default=fallback.hold_frames,
                    help="malformed frames answered with the last good command before a controlled stop "
@@ -56,10 +63,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=1,
                    help="server processes sharing the port (several simulators at once; WebSocket transport "
                         "only when > 1; POSIX only). Default 1")
-    p.add_argument("--ping-interval", type=float, default=25.0, help="seconds between the server's pings (default 25)")
+    p.add_argument("--ping-interval", type=float, default=server.ping_interval_s,
+                   help="seconds between the server's pings (default %(default)s)")
     p.add_argument("--record", type=Path, default=None, metavar="DIR",
                    help="save every answered frame and the command sent as a Udacity-format log in DIR "
                         "(driving_log.csv + IMG/), written off the drive loop (like Udacity's drive.py FOLDER)")
+    limits = WireLimits  # the defaults, defined once
+    p.add_argument("--max-connections", type=int, default=limits.max_connections,
+                   help="open connections at most; then the oldest one still sending its headers is closed, "
+                        "or the new one refused (default %(default)s)")
+    p.add_argument("--header-timeout", type=float, default=limits.header_timeout_s,
+                   help="seconds a connection has to send its request headers (default %(default)s)")
+    p.add_argument("--max-pending", type=int, default=limits.max_pending_replies,
+                   help="replies queued for a client that does not read them before it is disconnected "
+                        "(default %(default)s)")
     p.add_argument("--stock-transport", action="store_true",
                    help="disable the WebSocket transport tuning (for comparison benchmarks)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -98,6 +115,10 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--record works with one server process (--workers 1)")
         if args.ping_interval < 1:
             raise ValueError(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
+        if not 0 <= args.port <= 65535:
+            raise ValueError(f"--port must be in 0..65535, got {args.port}")
+        WireLimits(max_connections=args.max_connections, header_timeout_s=args.header_timeout,
+                   max_pending_replies=args.max_pending)
     except ValueError as exc:
         return fail(str(exc))
     model_path = args.model
@@ -112,36 +133,38 @@ def main(argv: list[str] | None = None) -> int:
     except ModelError as exc:
         return fail(str(exc))
 
+    # the port too is checked before anything is logged: a port in use is one line, like a bad model
+    try:
+        sock = listen.listening_socket(args.host, args.port)
+    except listen.ListenError as exc:
+        return fail(str(exc))
+
     # one frame at a time: OpenCV's worker threads only add wake-up latency to a 160x80 resize
     cv2.setNumThreads(1)
     # imported only now: the model check above must not pay for (or print anything from) eventlet
     from drive_server.pipeline import DrivePipeline
-    from drive_server.server import DriveServer, ServerConfig
+    from drive_server.server import DriveServer
     from drive_server.transport import TransportTuning
 
     tuning = TransportTuning.stock() if args.stock_transport else TransportTuning()
     config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
-                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval)
+                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval,
+                          max_connections=args.max_connections, header_timeout_s=args.header_timeout,
+                          max_pending_replies=args.max_pending)
     log.info("model %s", model.describe())
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s",
              drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value)
+    if not listen.is_local(sock.getsockname()[0]):
+        log.warning(listen.EXPOSED_WARNING, listen.url(sock).removeprefix("http://"))
     if args.workers > 1:
-        from drive_server.workers import listening_socket, serve_workers
-
-        try:
-            sock = listening_socket(args.host, args.port)
-        except OSError as exc:
-            return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
+        from drive_server.workers import serve_workers
 
         def make_server(worker_config: ServerConfig) -> DriveServer:  # runs in each worker, after the fork
             return DriveServer(DrivePipeline(SteeringModel(model_path, inference), drive), worker_config)
 
         return serve_workers(args.workers, sock, model, config, make_server, tuning)
     server = DriveServer(DrivePipeline(model, drive), config)
-    try:
-        server.bind()
-    except OSError as exc:
-        return fail(f"cannot listen on {args.host}:{args.port}: {exc.strerror or exc}")
+    server.adopt(sock)
     if args.record is not None:
         from drive_server.recorder import Recorder
 
@@ -152,7 +175,6 @@ def main(argv: list[str] | None = None) -> int:
         if server.recorder is not None:
             server.recorder.close()
     return 0
-
 
 if __name__ == "__main__":
     raise SystemExit(main())

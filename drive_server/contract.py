@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -21,6 +22,11 @@ METADATA_KEY = "rbc.preprocess"
 #: Other metadata keys written by training (informational: behavior, arch, approach, run config).
 METADATA_MODEL_INFO_KEY = "rbc.model"
 CONTRACT_VERSION = 1
+#: Largest network input side: the camera frame is 320x160, so anything far above is a broken contract
+#: (1e6 on a dynamic input once meant a 10.9 TiB allocation).
+MAX_INPUT_SIDE = 1024
+#: Largest |scale| and |offset|: x * scale + offset must stay finite in float32 for any pixel.
+MAX_SCALE = 1e6
 
 _COLORS = ("rgb", "yuv", "bgr")
 _LAYOUTS = ("nhwc", "nchw")
@@ -52,6 +58,22 @@ class PreprocessContract:
     version: int = CONTRACT_VERSION
 
     def __post_init__(self) -> None:
+        # types first: JSON metadata can hold "1", 64.0, null or 1e39 where a number belongs, and each of
+        # those used to start the server (or allocate terabytes) instead of being refused here
+        if type(self.version) is not int or self.version != CONTRACT_VERSION:
+            raise ContractError(f"version must be the integer {CONTRACT_VERSION}, not {self.version!r}")
+        for name in ("width", "height", "crop_top", "crop_bottom"):
+            if type(getattr(self, name)) is not int:
+                raise ContractError(f"{name} must be an integer, not {getattr(self, name)!r}")
+        for name in ("scale", "offset"):
+            value = getattr(self, name)
+            if type(value) not in (int, float) or not math.isfinite(value) or abs(value) > MAX_SCALE:
+                raise ContractError(f"{name} must be a finite number within +-{MAX_SCALE:g}, not {value!r}")
+        if self.scale == 0:
+            raise ContractError("scale must not be 0 (every frame would look the same to the network)")
+        for name in ("color", "layout", "interpolation"):
+            if not isinstance(getattr(self, name), str):
+                raise ContractError(f"{name} must be a string, not {getattr(self, name)!r}")
         if self.color not in _COLORS:
             raise ContractError(f"color must be one of {_COLORS}, not {self.color!r}")
         if self.layout not in _LAYOUTS:
@@ -62,6 +84,9 @@ class PreprocessContract:
             raise ContractError(f"crop rows [{self.crop_top}, {self.crop_bottom}) outside 0..{FRAME_HEIGHT}")
         if self.width < 8 or self.height < 8:
             raise ContractError(f"input size {self.width}x{self.height} is too small")
+        if self.width > MAX_INPUT_SIDE or self.height > MAX_INPUT_SIDE:
+            raise ContractError(f"input size {self.width}x{self.height} is larger than {MAX_INPUT_SIDE} pixels a side "
+                                "(the camera frame is 320x160)")
 
     @property
     def input_shape(self) -> tuple[int, int, int, int]:
@@ -85,8 +110,9 @@ class PreprocessContract:
         unknown = set(data) - known
         if unknown:
             raise ContractError(f"{METADATA_KEY} has unknown keys {sorted(unknown)}")
-        if data.get("version", CONTRACT_VERSION) > CONTRACT_VERSION:
-            raise ContractError(f"contract version {data['version']} is newer than this drive server supports")
+        version = data.get("version", CONTRACT_VERSION)
+        if type(version) is int and version > CONTRACT_VERSION:
+            raise ContractError(f"contract version {version} is newer than this drive server supports")
         try:
             return cls(**data)
         except TypeError as exc:

@@ -108,15 +108,31 @@ class SteeringModel:
         return float(out.reshape(-1)[0])
 
     def warm_up(self) -> None:
-        """Run once on zeros: allocates ORT's buffers before the first real frame and checks the output."""
-        x = np.zeros(self.contract.input_shape, np.float32)
+        """One full preprocessing + inference pass on a synthetic camera frame, before the server listens.
+
+        Allocates ORT's buffers before the first real frame and checks, through THE preprocessing
+        function and at the decode scale serving uses, that the contract works on this input and that
+        the output is one finite value: a model that answers NaN is refused here, not on every frame.
+        """
+        from drive_server.preprocess import jpeg_reduction, preprocess
+        from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
+
+        reduce = jpeg_reduction(self.contract)
+        h, w = FRAME_HEIGHT // reduce, FRAME_WIDTH // reduce
+        ramp = np.linspace(0, 255, w, dtype=np.float32)[None, :, None] * np.linspace(0.3, 1.0, h)[:, None, None]
+        frame = np.broadcast_to(ramp, (h, w, 3)).astype(np.uint8)
         try:
+            x = preprocess(frame, self.contract)
             out = self._session.run(self._outputs, {self.input_name: x})[0]
         except Exception as exc:
-            raise ModelError(f"{self.path.name}: inference on a {list(x.shape)} input failed: {_first_line(exc)}") \
-                from None
-        if np.asarray(out).size != 1:
+            raise ModelError(f"{self.path.name}: preprocessing + inference on a test frame "
+                             f"({list(self.contract.input_shape)} input) failed: {_first_line(exc)}") from None
+        out = np.asarray(out)
+        if out.size != 1:
             raise ModelError(f"{self.path.name}: output must hold one steering value, got shape {list(out.shape)}")
+        if not np.isfinite(out).all():
+            raise ModelError(f"{self.path.name}: output on a test frame is not finite ({float(out.reshape(-1)[0])!r}); "
+                             "check the model's weights and its preprocessing contract")
 
     def describe(self) -> str:
         return (f"{self.path.name} input {self.input_name}{list(self.input_shape)} "

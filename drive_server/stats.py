@@ -30,7 +30,9 @@ class LatencyStats:
         self.name = name
         self.frames = 0  # frames answered with the model's command
         self.manual = 0  # null (manual mode) frames
-        self.malformed = 0  # frames answered by the fallback policy
+        self.malformed = 0  # frames answered by the fallback policy because the INPUT was unusable
+        self.bad_input: dict[str, int] = {}  # ``malformed`` by kind of bad input (image, number, payload, json)
+        self.bad_output = 0  # frames answered by the fallback policy because the MODEL's output was not finite
         self.capacity = capacity
         self.recorded = 0  # frames whose timings went into the ring (``frames`` may also count others)
         self._ring = np.zeros((min(capacity, _INITIAL_ROWS), len(STAGES)), np.float32)
@@ -41,6 +43,19 @@ class LatencyStats:
         self._ring[self.recorded % len(self._ring)] = timings
         self.recorded += 1
         self.frames += 1
+
+    def count_bad_input(self, kind: str) -> None:
+        self.malformed += 1
+        self.bad_input[kind] = self.bad_input.get(kind, 0) + 1
+
+    def absorb_counters(self, other: LatencyStats) -> None:
+        """Add ``other``'s counters to these (statistics of clients too old to keep one by one)."""
+        self.frames += other.frames
+        self.manual += other.manual
+        self.malformed += other.malformed
+        self.bad_output += other.bad_output
+        for kind, n in other.bad_input.items():
+            self.bad_input[kind] = self.bad_input.get(kind, 0) + n
 
     def samples(self, since: int = 0) -> np.ndarray:
         """Timings of the retained frames numbered ``since`` and later, oldest first; shape (n, len(STAGES))."""
@@ -54,13 +69,34 @@ class LatencyStats:
         return summarize([self])
 
     @classmethod
-    def from_samples(cls, name: str, samples: np.ndarray, frames: int, manual: int, malformed: int) -> LatencyStats:
+    def from_samples(cls, name: str, samples: np.ndarray, frames: int, manual: int, malformed: int,
+                     bad_input: dict[str, int] | None = None, bad_output: int = 0) -> LatencyStats:
         """Rebuild statistics from saved samples (how a worker process hands its statistics back)."""
         stats = cls(name, capacity=max(1, len(samples)))
         stats._ring = np.asarray(samples, np.float32).reshape(-1, len(STAGES))
         stats.recorded = len(stats._ring)
         stats.frames, stats.manual, stats.malformed = frames, manual, malformed
+        stats.bad_input, stats.bad_output = dict(bad_input or {}), bad_output
         return stats
+
+
+class FaultCounters:
+    """Server-wide counts of what a client did wrong or the server refused, by kind (``FaultLog`` adds to it):
+    protocol_error, message_too_large, header_timeout, refused, evicted, slow_reader (disconnected for
+    not reading its replies)."""
+
+    def __init__(self) -> None:
+        self.counts: dict[str, int] = {}
+
+    def add(self, kind: str, n: int = 1) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + n
+
+    def merge(self, counts: dict[str, int]) -> None:
+        for kind, n in counts.items():
+            self.add(kind, n)
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(sorted(self.counts.items()))
 
 
 def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
@@ -70,7 +106,8 @@ def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
     meta = []
     for i, s in enumerate(stats):
         arrays[f"s{i}"] = s.samples()
-        meta.append({"name": s.name, "frames": s.frames, "manual": s.manual, "malformed": s.malformed})
+        meta.append({"name": s.name, "frames": s.frames, "manual": s.manual, "malformed": s.malformed,
+                     "bad_input": s.bad_input, "bad_output": s.bad_output})
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
     with atomic_path(path) as tmp, tmp.open("wb") as fh:  # a file object: np.savez would add ".npz" to a name
         np.savez(fh, **arrays)
@@ -80,7 +117,8 @@ def load_stats(path: Path) -> list[LatencyStats]:
     """The statistics saved by ``save_stats``."""
     with np.load(Path(path)) as data:
         meta = json.loads(data["meta"].tobytes().decode())
-        return [LatencyStats.from_samples(m["name"], data[f"s{i}"], m["frames"], m["manual"], m["malformed"])
+        return [LatencyStats.from_samples(m["name"], data[f"s{i}"], m["frames"], m["manual"], m["malformed"],
+                                          m.get("bad_input"), m.get("bad_output", 0))
                 for i, m in enumerate(meta)]
 
 
@@ -98,6 +136,8 @@ def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None
         "frames": sum(s.frames for s in stats),
         "manual": sum(s.manual for s in stats),
         "malformed": sum(s.malformed for s in stats),
+        "bad_input": _sum_kinds(s.bad_input for s in stats),
+        "bad_output": sum(s.bad_output for s in stats),
         "sampled": len(timings),
         "stages_ms": {},
     }
@@ -112,11 +152,24 @@ def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None
     return out
 
 
+def _sum_kinds(counts: Iterable[dict[str, int]]) -> dict[str, int]:
+    total: dict[str, int] = {}
+    for c in counts:
+        for kind, n in c.items():
+            total[kind] = total.get(kind, 0) + n
+    return dict(sorted(total.items()))
+
+
 def summary_line(summary: dict[str, Any]) -> str:
-    """One log line: counters, then p50/p99 in ms per stage."""
+    """One log line: counters, then p50/p99 in ms per stage, then the kinds of bad input and bad output."""
     head = f"frames {summary['frames']} manual {summary['manual']} malformed {summary['malformed']}"
+    tail = ""
+    if summary.get("bad_input"):
+        tail += " | malformed: " + ", ".join(f"{kind} {n}" for kind, n in summary["bad_input"].items())
+    if summary.get("bad_output"):
+        tail += f" | non-finite model output {summary['bad_output']}"
     stages = summary["stages_ms"]
     if not stages:
-        return head
+        return head + tail
     return head + " | p50/p99 ms " + " ".join(
-        f"{name} {stages[name]['p50']:.3f}/{stages[name]['p99']:.3f}" for name in STAGES)
+        f"{name} {stages[name]['p50']:.3f}/{stages[name]['p99']:.3f}" for name in STAGES) + tail

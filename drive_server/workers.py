@@ -16,6 +16,7 @@ POSIX only (fork).
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import signal
@@ -27,27 +28,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from drive_server import listen
 from drive_server.model import SteeringModel
 from drive_server.runrecords import write_json
 from drive_server.server import DriveServer, ServerConfig, stats_document
-from drive_server.stats import load_stats, summarize, summary_line
+from drive_server.stats import FaultCounters, load_stats, summarize, summary_line
 from drive_server.transport import TransportTuning
 
 log = logging.getLogger(__name__)
-
-
-def listening_socket(host: str, port: int, backlog: int = 128) -> socket.socket:
-    """A plain listening TCP socket to share with forked workers (raises ``OSError`` if taken)."""
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    sock = socket.socket(family, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((host, port))
-        sock.listen(backlog)
-    except OSError:
-        sock.close()
-        raise
-    return sock
 
 
 def _run_worker(index: int, sock: socket.socket, make_server: Callable[[ServerConfig], DriveServer],
@@ -69,7 +57,6 @@ def serve_workers(workers: int, sock: socket.socket, model: SteeringModel, confi
     SIGINT/SIGTERM stop the workers; their statistics are merged into ``config.stats_json``. If a worker
     dies on its own, the others are stopped too (exit code 1): a half-served port is worse than none.
     """
-    host, port = sock.getsockname()[:2]
     tmp = tempfile.TemporaryDirectory(prefix="drive_server_workers_")
     pids: dict[int, int] = {}
     for i in range(workers):
@@ -95,7 +82,7 @@ def serve_workers(workers: int, sock: socket.socket, model: SteeringModel, confi
         stop = True
 
     previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    log.info("listening on http://%s:%d (%d worker processes, WebSocket transport only)", host, port, workers)
+    log.info("listening on %s (%d worker processes, WebSocket transport only)", listen.url(sock), workers)
     code = 0
     try:
         while not stop:
@@ -113,8 +100,14 @@ def serve_workers(workers: int, sock: socket.socket, model: SteeringModel, confi
         stats = [s for i in range(workers) if (Path(tmp.name) / f"worker{i}.npz").is_file()
                  for s in load_stats(Path(tmp.name) / f"worker{i}.npz")]
         log.info("stopped: %s", summary_line(summarize(stats)))
+        faults = FaultCounters()
+        for i in range(workers):
+            dump = (Path(tmp.name) / f"worker{i}.npz").with_suffix(".faults.json")
+            if dump.is_file():
+                faults.merge(json.loads(dump.read_text(encoding="utf-8")))
         if config.stats_json is not None:
-            write_json(config.stats_json, stats_document(model, transport, stats, workers=workers), sort_keys=True)
+            write_json(config.stats_json, stats_document(model, transport, stats, workers=workers,
+                                                         faults=faults.as_dict(), limits=config.limits), sort_keys=True)
         tmp.cleanup()
     return code
 

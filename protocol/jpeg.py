@@ -15,13 +15,14 @@ import numpy as np
 
 from protocol.errors import ProtocolError
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH, IMAGE_MAGIC, JPEG_QUALITY
+from protocol.jpeg_header import require_size
 
 #: libjpeg's reduced-size decodes: ``reduce`` -> OpenCV flag.
 _REDUCE_FLAGS = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
                  8: cv2.IMREAD_REDUCED_COLOR_8}
 
 
-def decode_jpeg(raw: bytes | np.ndarray, reduce: int = 1, what: str = "image") -> np.ndarray:
+def decode_jpeg(raw: bytes | bytearray | memoryview | np.ndarray, reduce: int = 1, what: str = "image") -> np.ndarray:
     """Decode a 320x160 JPEG (or PNG) to an RGB ``uint8`` array (160/reduce, 320/reduce, 3).
 
     ``reduce`` in (1, 2, 4, 8) asks libjpeg to decode at 1/reduce size directly, which is cheaper
@@ -29,10 +30,11 @@ def decode_jpeg(raw: bytes | np.ndarray, reduce: int = 1, what: str = "image") -
     """
     if reduce not in _REDUCE_FLAGS:
         raise ValueError(f"reduce must be 1, 2, 4 or 8, not {reduce}")
-    buf = np.frombuffer(raw, np.uint8) if isinstance(raw, bytes | bytearray | memoryview) else raw
-    head = buf[:4].tobytes()
-    if not head.startswith(IMAGE_MAGIC):
-        raise ProtocolError(f"{what}: not a JPEG (starts with {head!r}, {buf.size} bytes)")
+    data = raw.tobytes() if isinstance(raw, np.ndarray) else bytes(raw)  # bytes(bytes) is no copy
+    if not data.startswith(IMAGE_MAGIC):
+        raise ProtocolError(f"{what}: not a JPEG (starts with {data[:4]!r}, {len(data)} bytes)")
+    require_size(data, FRAME_WIDTH, FRAME_HEIGHT, what)  # a decompression bomb is refused before decoding
+    buf = np.frombuffer(data, np.uint8)
     bgr = cv2.imdecode(buf, _REDUCE_FLAGS[reduce])
     if bgr is None:
         raise ProtocolError(f"{what}: corrupt JPEG ({buf.size} bytes)")
@@ -53,7 +55,7 @@ def decode_image(image_b64: str, reduce: int = 1) -> np.ndarray:
 
 def read_jpeg_file(path: Path, reduce: int = 1) -> np.ndarray:
     """Decode a recorded frame file with :func:`decode_jpeg` (``OSError`` if it cannot be read)."""
-    return decode_jpeg(np.fromfile(str(path), dtype=np.uint8), reduce, what=str(path))
+    return decode_jpeg(Path(path).read_bytes(), reduce, what=str(path))
 
 
 def encode_jpeg(rgb: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:

@@ -8,6 +8,7 @@ makes it throw silently and stall.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,25 +34,39 @@ class SteerCommand:
 
 
 def parse_number(value: Any, field: str) -> float:
-    """Parse a telemetry number: a string (``"0.25"``, locale ``"0,25"``, ``"7.8E-05"``) or a number."""
+    """Parse a telemetry number: a string (``"0.25"``, locale ``"0,25"``, ``"7.8E-05"``) or a number.
+
+    Strict on purpose: ASCII decimal only (``float()`` would also take ``"1_000"``, ``"inf"``,
+    Arabic-Indic or full-width digits), at most 64 characters, finite, and within sensible bounds
+    (speed 0..1000, anything else +-1e6), so that no string can become full throttle or an
+    overflow further down.
+    """
+    low, high = (0.0, 1000.0) if field == "speed" else (-1e6, 1e6)
     if isinstance(value, bool):
         raise ProtocolError(f"{field}: expected a number, got a boolean")
-    if isinstance(value, int | float):
+    if isinstance(value, int):
+        if not low <= value <= high:  # compared as int: a 400-digit integer never reaches float()
+            raise ProtocolError(f"{field}: {str(value)[:20]}... is outside [{low:g}, {high:g}]")
         number = float(value)
+    elif isinstance(value, float):
+        number = value
     elif isinstance(value, str):
         text = value.strip()
+        if len(text) > 64:
+            raise ProtocolError(f"{field}: number too long ({len(text)} characters)")
         if "," in text:
             if "." in text:
                 raise ProtocolError(f"{field}: ambiguous number {value!r} (both ',' and '.')")
             text = text.replace(",", ".")
-        try:
-            number = float(text)
-        except ValueError:
-            raise ProtocolError(f"{field}: not a number: {value[:40]!r}") from None
+        if not re.fullmatch(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?", text):
+            raise ProtocolError(f"{field}: not a number: {value[:40]!r}")
+        number = float(text)
     else:
         raise ProtocolError(f"{field}: expected a number or a string, got {type(value).__name__}")
     if not math.isfinite(number):
         raise ProtocolError(f"{field}: not finite: {value!r}")
+    if not low <= number <= high:
+        raise ProtocolError(f"{field}: {number:g} is outside [{low:g}, {high:g}]")
     return number
 
 

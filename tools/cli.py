@@ -48,6 +48,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
     Subcommand("bench", "tools.commands.bench", "round-trip latency benchmark of drive_server over the Unity wire"),
     Subcommand("video", "tools.commands.video",
                "a browser-playable video of a recording (drive_server --record, rbc collect, Unity)"),
+    Subcommand("fuzz", "tools.commands.fuzz",
+               "hostile-client campaign against drive_server; healthy latency beside it"),
     Subcommand("replay", "tools.commands.replay",
                "replay a driving log to a drive server as the Unity simulator would"),
     Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),

@@ -124,13 +124,20 @@ def read_journal(path: Path) -> dict[str, dict[str, Any]]:
         except (json.JSONDecodeError, KeyError, TypeError):
             log.warning("%s line %d is not a complete run record; it will be run again", path, n)
             continue
-        if key is not None:
-            found[key] = record
+        if key is None:
+            continue
+        if record.get("interrupted"):  # journaled by an older version: a run cut short is not a result
+            log.warning("%s line %d is a run cut short by an interruption; it will be run again", path, n)
+            continue
+        found[key] = record
     return found
 
 
 class Runner:
     """A process pool that records every finished run to a JSON-lines journal as it arrives.
+
+    Only runs that ended on their own are journaled: a run cut short by Ctrl-C is dropped (and rerun on
+    ``--resume``).
 
     The journal makes an interrupted evaluation keep its finished runs; ``reuse`` (journaled records
     by task key) lets a resumed evaluation skip them: they are neither run nor journaled again.
@@ -171,6 +178,10 @@ class Runner:
         if future.cancelled() or future.exception() is not None:
             return
         record = future.result()
+        if record.get("interrupted"):
+            # Ctrl-C reaches the workers too, and the simulator returns the run so far: eta 0 for a run
+            # that never failed. Neither journaled (a resume would reuse it) nor counted as a result.
+            return
         with self._lock:
             self.records.append(record)
             with self.journal.open("a", encoding="utf-8") as fh:

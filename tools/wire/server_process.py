@@ -60,6 +60,15 @@ class ServerProcess:
         raise ServerStartError(f"drive_server did not start listening in {self.start_timeout:.0f} s:\n"
                                f"{self.log()[-2000:]}")
 
+    @property
+    def pid(self) -> int | None:
+        """The server's process id once started (benchmarks read its memory and open files)."""
+        return self._proc.pid if self._proc is not None else None
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
     def log(self) -> str:
         try:
             return self.log_path.read_text(encoding="utf-8", errors="replace")

@@ -101,6 +101,11 @@ class UnityWireClient:
         self.server_ping_interval_s = info.get("pingInterval", 25000) / 1000.0
         self._last_ping_sent = time.monotonic()
 
+    @property
+    def socket(self) -> Any:
+        """The TCP socket under the WebSocket (hostile tests write raw, unframed bytes to it)."""
+        return self._ws.socket
+
     def close(self) -> None:
         """Send a WebSocket close frame and close the socket (idempotent)."""
         self._ws.close()

@@ -52,6 +52,11 @@ class WebSocketConnection:
     def connected(self) -> bool:
         return self._sock is not None
 
+    @property
+    def socket(self) -> socket.socket | None:
+        """The TCP socket (for tests and benchmarks that write raw bytes or shrink its buffers)."""
+        return self._sock
+
     def open(self, path: str, user_agent: str) -> None:
         """Connect and upgrade ``path``; raises ``ConnectionError`` if the server refuses."""
         sock = socket.create_connection((self.host, self.port), timeout=self.timeout)

@@ -1,0 +1,51 @@
+"""What the drive server remembers of its clients: each connected simulator's state, and the statistics
+of the ones that left (bounded, however many connect and disconnect)."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from drive_server.guard import FrameGuard
+from drive_server.server_config import RETIRED
+from drive_server.stats import LatencyStats
+
+#: Disconnected clients whose statistics are kept individually (older ones only add to the counters).
+MAX_FINISHED_CLIENTS = 64
+
+
+@dataclass
+class ClientState:
+    """What the server remembers about one connected simulator."""
+
+    sid: str
+    eio_sid: str | None
+    direct: bool  # replies handed to engine.io directly (``TransportTuning.direct_reply``)
+    user_agent: str
+    stats: LatencyStats
+    guard: FrameGuard
+    socket: Any = None  # the WebSocket's TCP socket (None for long-polling)
+    replies: int = 0
+    unsent: int = 0
+
+
+class ClientHistory:
+    """Statistics of disconnected clients: the last ``MAX_FINISHED_CLIENTS`` one by one, older ones summed."""
+
+    def __init__(self) -> None:
+        self.finished: deque[LatencyStats] = deque()  # disconnected clients, newest last
+        self.retired = LatencyStats(RETIRED, capacity=1)  # counters of clients dropped from ``finished``
+
+    def add(self, stats: LatencyStats) -> list[str]:
+        """Keep ``stats`` of a client that left; returns the names of those folded into the totals."""
+        self.finished.append(stats)
+        folded = []
+        while len(self.finished) > MAX_FINISHED_CLIENTS:  # bound memory over many reconnections
+            old = self.finished.popleft()
+            self.retired.absorb_counters(old)
+            folded.append(old.name)
+        return folded
+
+    def all_stats(self) -> list[LatencyStats]:
+        return [self.retired, *self.finished]
