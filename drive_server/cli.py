@@ -11,6 +11,7 @@ import logging
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 import cv2
 
@@ -65,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "only when > 1; POSIX only). Default 1")
     p.add_argument("--ping-interval", type=float, default=server.ping_interval_s,
                    help="seconds between the server's pings (default %(default)s)")
+    p.add_argument("--dashboard", action=argparse.BooleanOptionalAction, default=None,
+                   help="serve the read-only live view at http://HOST:PORT/ (default: on when listening on "
+                        "localhost, off otherwise: it shows the camera to anyone who can connect)")
     p.add_argument("--record", type=Path, default=None, metavar="DIR",
                    help="save every answered frame and the command sent as a Udacity-format log in DIR "
                         "(driving_log.csv + IMG/), written off the drive loop (like Udacity's drive.py FOLDER)")
@@ -83,6 +87,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"drive_server {_version()}",
                    help="print the version and exit")
     return p
+
+
+def _dashboard_wanted(args: argparse.Namespace, sock: Any) -> bool:
+    """On by default on localhost only; one process's view of its own clients, so not with --workers."""
+    wanted = listen.is_local(sock.getsockname()[0]) if args.dashboard is None else args.dashboard
+    if wanted and args.workers > 1:
+        if args.dashboard:
+            log.warning("--dashboard is not available with --workers > 1 (each worker sees only its own clients)")
+        return False
+    return wanted
 
 
 def _version() -> str:
@@ -150,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
                           fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval,
                           max_connections=args.max_connections, header_timeout_s=args.header_timeout,
-                          max_pending_replies=args.max_pending)
+                          max_pending_replies=args.max_pending, dashboard=_dashboard_wanted(args, sock))
     log.info("model %s", model.describe())
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s",
              drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value)

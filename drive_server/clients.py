@@ -7,7 +7,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
+from drive_server.gates import unsent_bytes
 from drive_server.guard import FrameGuard
+from drive_server.limits import MAX_UNSENT_BYTES
 from drive_server.server_config import RETIRED
 from drive_server.stats import LatencyStats
 
@@ -28,6 +30,17 @@ class ClientState:
     socket: Any = None  # the WebSocket's TCP socket (None for long-polling)
     replies: int = 0
     unsent: int = 0
+    live: Any = None  # the latest answered frame, for the live view (a drive_server.dashboard.LiveFrame)
+
+    def not_reading(self, session: Any, max_pending: int) -> bool:
+        """Replies pile up in engine.io's queue, or (checked every 32 replies: one ioctl) in the kernel."""
+        if session.queue.qsize() >= max_pending:
+            return True
+        self.replies += 1
+        if self.replies % 32 or self.socket is None:
+            return False
+        self.unsent = unsent_bytes(self.socket)
+        return self.unsent > MAX_UNSENT_BYTES
 
 
 class ClientHistory:

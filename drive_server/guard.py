@@ -37,6 +37,8 @@ class FrameGuard:
         self.policy = policy
         self.last_good: SteerCommand | None = None
         self.bad_run = 0
+        self.held = 0  # bad frames answered with the last good command
+        self.stopped = 0  # bad frames answered with the stop command
 
     def good(self, command: SteerCommand) -> SteerCommand:
         self.last_good = command
@@ -47,5 +49,7 @@ class FrameGuard:
         """The reply to a frame that could not be used."""
         self.bad_run += 1
         if self.last_good is not None and self.bad_run <= self.policy.hold_frames:
+            self.held += 1
             return self.last_good
+        self.stopped += 1
         return self.policy.stop_command

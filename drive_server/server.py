@@ -13,6 +13,7 @@ import json
 import logging
 import signal
 import warnings
+from dataclasses import replace
 from time import perf_counter
 from typing import Any
 
@@ -23,12 +24,10 @@ from drive_server.gates import (
     polling_gate,
     protocol_class,
     shutdown_socket,
-    unsent_bytes,
 )
 from drive_server.guard import FrameGuard
 from drive_server.limits import (
     CLOSE_PROTOCOL_ERROR,
-    MAX_UNSENT_BYTES,
     FaultLog,
     close_reason,
 )
@@ -44,7 +43,9 @@ import eventlet.greenio  # noqa: E402
 import eventlet.wsgi  # noqa: E402
 import socketio  # noqa: E402
 
+from drive_server import live  # noqa: E402
 from drive_server.clients import ClientHistory, ClientState  # noqa: E402
+from drive_server.dashboard import LiveFrame  # noqa: E402
 from drive_server.server_config import ServerConfig, stats_document  # noqa: E402
 from drive_server.unity_compat import UnityCompatibleServer  # noqa: E402
 
@@ -90,7 +91,9 @@ class DriveServer:
         self.sio.on("connect", self._on_connect)
         self.sio.on("disconnect", self._on_disconnect)
         self.sio.on("telemetry", self._on_telemetry)
-        self.app = polling_gate(socketio.WSGIApp(self.sio), eio, self.limits, self.fault_log)
+        self.dashboard = live.make_dashboard(self) if config.dashboard else None
+        pages = self.dashboard.wsgi if self.dashboard is not None else None  # every path but /socket.io/
+        self.app = polling_gate(socketio.WSGIApp(self.sio, wsgi_app=pages), eio, self.limits, self.fault_log)
 
     # -- events ----------------------------------------------------------------------------------
     def _on_connect(self, sid: str, environ: dict[str, Any], auth: Any = None) -> None:
@@ -129,7 +132,7 @@ class DriveServer:
         two frames in flight): it is disconnected instead of being served, and its queue grown, forever.
         """
         session = self.sio.eio.sockets.get(client.eio_sid) if client.eio_sid else None
-        if session is not None and self._not_reading(client, session):
+        if session is not None and client.not_reading(session, self.limits.max_pending_replies):
             self.fault_log.report("slow_reader", "client %s does not read its replies (%d queued, %d bytes unsent, "
                                   "--max-pending %d): disconnected", client.sid, session.queue.qsize(),
                                   client.unsent, self.limits.max_pending_replies)
@@ -139,16 +142,6 @@ class DriveServer:
             self.sio.emit(event, payload, to=client.sid)
         else:
             self.sio.eio.send(client.eio_sid, '2["' + event + '",' + json.dumps(payload, separators=(",", ":")) + "]")
-
-    def _not_reading(self, client: ClientState, session: Any) -> bool:
-        """Replies pile up in engine.io's queue, or (checked every 32 replies: one ioctl) in the kernel."""
-        if session.queue.qsize() >= self.limits.max_pending_replies:
-            return True
-        client.replies += 1
-        if client.replies % 32 or client.socket is None:
-            return False
-        client.unsent = unsent_bytes(client.socket)
-        return client.unsent > MAX_UNSENT_BYTES
 
     def _on_telemetry(self, sid: str, payload: Any = None, *_: Any) -> None:
         # no payload at all is manual mode too: python-socketio's ``emit("telemetry", None)`` sends that
@@ -179,6 +172,8 @@ class DriveServer:
         client.stats.record((t_parse + decode, pre, infer, control + (t5 - t4), t5 - t0))
         if self.recorder is not None:  # after the reply: recording never delays the simulator
             self.recorder.record(telemetry.image_b64, sent, telemetry.speed)
+        if self.dashboard is not None:  # one assignment: the live view reads it off the hot path
+            client.live = LiveFrame(t0, telemetry.image_b64, sent.steering, sent.throttle, telemetry.speed, False)
 
     def _on_bad_telemetry(self, sid: str, kind: str, reason: str) -> None:
         """A telemetry event too broken to decode (JSON too deep, a huge number): answered all the same."""
@@ -214,6 +209,9 @@ class DriveServer:
             client.stats.count_bad_input(kind)
         command = client.guard.bad()
         self._reply(client, "steer", encode_steer(command))
+        if client.live is not None:  # the live view shows the fallback command over the last good frame
+            client.live = replace(client.live, t=perf_counter(), steering=command.steering,
+                                  throttle=command.throttle, fallback=True)
         action = "stopping" if command == self.config.fallback.stop_command else "holding the last command"
         what = "model output" if kind == "model_output" else "malformed frame"
         self.fault_log.report(f"frame:{kind}", "client %s: %s (%s); %s [%d malformed, %d non-finite outputs "
@@ -279,6 +277,8 @@ class DriveServer:
         gc.freeze()
         if announce:
             log.info("listening on %s", listen.url(sock))
+            if self.dashboard is not None:
+                log.info("live view (read-only) at %s/", listen.url(sock))
         try:
             while not self._stop and not server.dead:
                 eventlet.sleep(0.2)  # a signal only sets a flag; this loop notices it

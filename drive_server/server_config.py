@@ -37,6 +37,7 @@ class ServerConfig:
     max_connections: int = WireLimits.max_connections  # open TCP connections (a simulator holds one)
     header_timeout_s: float = WireLimits.header_timeout_s  # to send the request line and headers (and a poll body)
     max_pending_replies: int = WireLimits.max_pending_replies  # queued replies of a client that does not read
+    dashboard: bool = False  # the read-only live view at http://HOST:PORT/ (drive_server.dashboard)
 
     @property
     def limits(self) -> WireLimits:

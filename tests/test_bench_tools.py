@@ -84,3 +84,13 @@ def test_rbc_bench_without_onnx_says_what_to_do(monkeypatch, caplog):
     monkeypatch.delitem(sys.modules, "tools.bench.onnx_builders", raising=False)
     assert rbc(["bench", "--frames", "1"]) == 2
     assert "--model" in caplog.text and "onnx" in caplog.text
+
+
+def test_the_benchmarks_find_the_real_frames_of_a_checkout():
+    """Moving a module must not silently switch a benchmark to synthetic frames."""
+    from tools.bench.fuzz_campaign import DEFAULT_LOG as FUZZ_LOG
+    from tools.bench.latency import DEFAULT_LOG, load_frames
+
+    assert DEFAULT_LOG.is_dir() and FUZZ_LOG == DEFAULT_LOG
+    frames, source = load_frames(None)
+    assert "synthetic" not in source and len(frames) > 30

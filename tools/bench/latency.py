@@ -28,7 +28,7 @@ from tools.wire.unity_client import UnityWireClient
 
 log = logging.getLogger("rbc.bench")
 
-DEFAULT_LOG = Path(__file__).resolve().parents[1] / "tests" / "data" / "udacity-sample"
+DEFAULT_LOG = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
 
 
 @dataclass

@@ -29,6 +29,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="drive_server --speed-limit in km/h (default %(default)s)")
     add_vehicle_argument(p, ScenarioConfig.vehicle)
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
+    p.add_argument("--watch", action="store_true",
+                   help="drive at the pace of the wall clock and print the live view's address, so the lap can "
+                        "be watched in a browser (a 1 km lap takes about 3 minutes)")
 
 
 def _server_latency(stats_path: Path) -> str:
@@ -48,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from drive_server.runrecords import write_json
     from tools.console import Progress
     from tools.sim.drivers import SocketDriver
+    from tools.sim.pacing import WallClockPacer, hooks
     from tools.sim.session import run_scenario
     from tools.sim.summary import print_summary
     from tools.sim.viz import StripCollector, write_trajectory_map
@@ -71,10 +75,13 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from exc
     print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track} "
           f"({config.vehicle} car)", flush=True)
+    if args.watch:
+        print(f"watch it live at {url}/ (open it in a browser; the lap runs at the wall clock's pace)", flush=True)
     progress = Progress(f"demo {config.track}")
     try:
         with SocketDriver(url) as driver:
-            result = run_scenario(config, driver, progress=progress, on_frame=strip)
+            on_frame = hooks(strip, WallClockPacer() if args.watch else None)
+            result = run_scenario(config, driver, progress=progress, on_frame=on_frame)
     except KeyboardInterrupt:  # before the lap began (world building, connecting): nothing was driven
         print("\ndegree of autonomy: none, interrupted before the first lap was finished (0 s driven)")
         return 130

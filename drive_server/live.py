@@ -1,0 +1,65 @@
+"""What the live view shows of a drive server: its model and control law, and each client's latest frame,
+counters and recent latency, built from data the server keeps anyway (nothing is computed per frame)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from drive_server.dashboard import RECENT_FRAMES
+from drive_server.stats import STAGES, summarize
+from protocol.units import to_kmh
+
+
+def server_view(server: Any) -> dict[str, Any]:
+    """The model, its input contract and the control law's parameters."""
+    pipeline = server.pipeline
+    cfg = pipeline.config
+    return {
+        "model": pipeline.model.path.name, "contract": pipeline.contract.__dict__,
+        "control": {"speed_limit_kmh": cfg.speed_limit_kmh, "steer_limit_deg": cfg.steer_limit_deg, "tau": cfg.tau,
+                    "speed_unit": cfg.speed_unit.value},
+        "clients": len(server.clients), "viewers": server.dashboard.viewers if server.dashboard else 0,
+    }
+
+
+def client_view(client: Any, cfg: Any, with_latency: bool, now: float) -> dict[str, Any]:
+    """One simulator's panel: latest frame (the JPEG as it was sent), counters, recent latency."""
+    stats, guard = client.stats, client.guard
+    entry: dict[str, Any] = {
+        "sid": client.sid, "agent": client.user_agent, "speed_unit": cfg.speed_unit.value,
+        "counters": {"frames": stats.frames, "malformed": stats.malformed, "manual (null)": stats.manual,
+                     "non-finite outputs": getattr(stats, "bad_output", 0), "held": guard.held,
+                     "stopped": guard.stopped},
+    }
+    frame = client.live
+    if frame is not None:
+        entry["frame"] = {"image": frame.image_b64, "age_s": round(now - frame.t, 2),
+                          "steering": round(frame.steering, 4),
+                          "steering_deg": round(frame.steering * cfg.steer_limit_deg, 2),
+                          "throttle": round(frame.throttle, 4), "speed": round(frame.speed, 2),
+                          "speed_kmh": round(to_kmh(frame.speed, cfg.speed_unit), 2), "fallback": frame.fallback}
+    if with_latency:
+        recent = summarize([stats], since={stats.name: stats.recorded - RECENT_FRAMES})["stages_ms"]
+        entry["latency"] = {stage: {"p50": recent[stage]["p50"], "p99": recent[stage]["p99"]}
+                            for stage in STAGES if stage in recent}
+    return entry
+
+
+def snapshot(server: Any, with_latency: bool) -> dict[str, Any]:
+    """One push to every viewer (``with_latency``: percentiles too, a few times a second)."""
+    now = time.perf_counter()
+    cfg = server.pipeline.config
+    return {"server": server_view(server),
+            "clients": [client_view(c, cfg, with_latency, now) for c in list(server.clients.values())]}
+
+
+def make_dashboard(server: Any) -> Any:
+    """The live view of ``server`` on eventlet: its ticker and viewer queues are greenthread primitives."""
+    import eventlet
+    import eventlet.queue
+
+    from drive_server.dashboard import Dashboard
+
+    return Dashboard(lambda with_latency: snapshot(server, with_latency), sleep=eventlet.sleep, spawn=eventlet.spawn,
+                     make_queue=lambda size: eventlet.queue.LightQueue(size))
