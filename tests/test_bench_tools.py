@@ -77,13 +77,14 @@ def test_rbc_replay_unreachable_server(capsys):
     assert len(err) == 1 and err[0].startswith("rbc replay: error: replay to http://127.0.0.1:9 failed")
 
 
-def test_rbc_bench_without_onnx_says_what_to_do(monkeypatch, caplog):
+def test_rbc_bench_without_onnx_says_what_to_do(monkeypatch, capsys):
     import sys
 
     monkeypatch.setitem(sys.modules, "onnx", None)  # as if the train extra were not installed
     monkeypatch.delitem(sys.modules, "tools.bench.onnx_builders", raising=False)
     assert rbc(["bench", "--frames", "1"]) == 2
-    assert "--model" in caplog.text and "onnx" in caplog.text
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rbc bench: error: ") and "--model" in err and 'pip install -e ".[train]"' in err
 
 
 def test_the_benchmarks_find_the_real_frames_of_a_checkout():

@@ -28,7 +28,7 @@ def _onnx() -> Any:
         import onnx
     except ModuleNotFoundError:
         raise ModuleNotFoundError(
-            "building benchmark models needs the 'onnx' package: pip install 'robust-behavioral-cloning[train]' "
+            "building benchmark models needs the 'onnx' package: pip install -e \".[train]\" "
             "(or pass --model PATH)", name="onnx") from None
     return onnx
 

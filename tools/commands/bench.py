@@ -9,6 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from tools.bench.latency import bench_one, format_table, load_frames
+from tools.errors import CommandError
 from tools.wire.server_process import ServerStartError
 
 log = logging.getLogger("rbc.bench")
@@ -46,15 +47,15 @@ def run(args: argparse.Namespace) -> int:
             try:
                 from tools.bench.onnx_builders import ARCHS, save_model
             except ModuleNotFoundError as exc:
-                log.error("%s", exc)
-                return 2
+                raise CommandError("building the benchmark's random-weight model needs the package 'onnx'",
+                                   'pip install -e ".[train]", or pass --model PATH') from exc
             names = ["shallow", "pilotnet"] if args.arch == "both" else [args.arch]
             try:
                 models = [(f"{n} (random weights, {ARCHS[n].params:,} params)",
                            save_model(n, Path(tmp) / f"{n}.onnx")) for n in names]
             except ModuleNotFoundError as exc:
-                log.error("%s", exc)
-                return 2
+                raise CommandError("building the benchmark's random-weight model needs the package 'onnx'",
+                                   'pip install -e ".[train]", or pass --model PATH') from exc
         results = []
         for label, model in models:
             workers = "" if args.server or args.workers == 1 else f", server with {args.workers} workers"
