@@ -7,10 +7,8 @@ it runs in seconds. Behaviour only: where a test waits, its bound is generous (s
 from __future__ import annotations
 
 import json
-import os
 import re
 import socket
-import struct
 import threading
 import time
 import urllib.request
@@ -19,10 +17,10 @@ import pytest
 from helpers_server import SAMPLE_LOG, build_shallow
 
 from protocol import SteerCommand
-from protocol.websocket import xor_mask as mask_payload
 from tools.wire.frames import log_frames
 from tools.wire.server_process import ServerProcess
 from tools.wire.unity_client import ConnectionClosed, UnityWireClient
+from tools.wire.websocket import client_frame
 
 pytest.importorskip("onnx", reason="the tests build their ONNX model with the onnx package")
 pytestmark = pytest.mark.slow
@@ -50,16 +48,6 @@ def server(model):
 def host_port(srv: ServerProcess) -> tuple[str, int]:
     host, port = srv.url.removeprefix("http://").rsplit(":", 1)
     return host, int(port)
-
-
-def ws_frame(opcode: int, payload: bytes, fin: bool = True) -> bytes:
-    """One masked client frame, final or not (``opcode`` 0 is a continuation)."""
-    n = len(payload)
-    b0 = (0x80 if fin else 0) | opcode
-    header = struct.pack("!BB", b0, 0x80 | n) if n < 126 else (
-        struct.pack("!BBH", b0, 0x80 | 126, n) if n < 65536 else struct.pack("!BBQ", b0, 0x80 | 127, n))
-    mask = os.urandom(4)
-    return header + mask + mask_payload(payload, mask)
 
 
 def close_code(client: UnityWireClient, timeout: float = 10.0) -> int | None:
@@ -112,8 +100,8 @@ def test_polling_post_with_garbage_is_refused_without_a_traceback(server):
 def test_continuation_frames_cannot_bypass_the_message_limit(server):
     """Item 3: 200 KiB fragments of one text message were buffered whole (256 MiB -> +513 MiB RSS)."""
     with UnityWireClient(server.url) as client:
-        client.socket.sendall(ws_frame(0x1, b'42["telemetry",{"image":"' + b"A" * 200_000, fin=False))
-        client.socket.sendall(ws_frame(0x0, b"A" * 200_000, fin=False))  # 400 KB so far, still not final
+        client.socket.sendall(client_frame(0x1, b'42["telemetry",{"image":"' + b"A" * 200_000, fin=False))
+        client.socket.sendall(client_frame(0x0, b"A" * 200_000, fin=False))  # 400 KB so far, still not final
         assert close_code(client) == 1009  # closed while the message arrives, not after it is complete
     with UnityWireClient(server.url) as client:
         assert isinstance(client.exchange(GOOD)[0], SteerCommand)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import json
 import logging
-import os
 import random
 import struct
 import threading
@@ -15,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from protocol import SteerCommand
-from protocol.websocket import xor_mask as mask_payload
 from tools.wire.frames import SourceFrame as Frame
 from tools.wire.unity_client import ConnectionClosed, UnityWireClient
+from tools.wire.websocket import client_frame
 
 log = logging.getLogger("rbc.fuzz")
 
@@ -83,20 +82,12 @@ class Mix:
         return self.rng.choice(self.bad), STEER, None
 
 
-def _frame(opcode: int, payload: bytes, fin: bool = True) -> bytes:
-    n = len(payload)
-    b0 = (0x80 if fin else 0) | opcode
-    header = struct.pack("!BB", b0, 0x80 | n) if n < 126 else (
-        struct.pack("!BBH", b0, 0x80 | 126, n) if n < 65536 else struct.pack("!BBQ", b0, 0x80 | 127, n))
-    mask = os.urandom(4)
-    return header + mask + mask_payload(payload, mask)
-
-
 #: Frames no Socket.IO client sends: each must close its connection with a close frame, and only it.
 PROTOCOL_ERRORS: tuple[bytes, ...] = (
-    _frame(0x1, b"45"), _frame(0x1, b"46"), _frame(0x1, b"hello"), _frame(0x1, b""), _frame(0x1, b"4[[[[]]]]"),
-    _frame(0x2, b"\x00\x01binary"), _frame(0x1, b'42["telemetry",{"image":"' + b"A" * 400_000 + b'"}]'),
-    _frame(0x1, b"4" + b"A" * 200_000, fin=False) + _frame(0x0, b"A" * 200_000, fin=False),
+    client_frame(0x1, b"45"), client_frame(0x1, b"46"), client_frame(0x1, b"hello"), client_frame(0x1, b""),
+    client_frame(0x1, b"4[[[[]]]]"),
+    client_frame(0x2, b"\x00\x01binary"), client_frame(0x1, b'42["telemetry",{"image":"' + b"A" * 400_000 + b'"}]'),
+    client_frame(0x1, b"4" + b"A" * 200_000, fin=False) + client_frame(0x0, b"A" * 200_000, fin=False),
 )
 
 

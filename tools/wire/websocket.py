@@ -26,15 +26,16 @@ class ConnectionClosed(ConnectionError):
     """The server closed the WebSocket (or the Engine.IO session)."""
 
 
-def client_frame(opcode: int, payload: bytes) -> bytes:
-    """One final, masked client frame."""
+def client_frame(opcode: int, payload: bytes, fin: bool = True) -> bytes:
+    """One masked client frame; ``fin=False`` (and opcode 0 for the next ones) splits a message in fragments."""
     n = len(payload)
+    b0 = (0x80 if fin else 0) | opcode
     if n < 126:
-        header = struct.pack("!BB", 0x80 | opcode, 0x80 | n)
+        header = struct.pack("!BB", b0, 0x80 | n)
     elif n < 65536:
-        header = struct.pack("!BBH", 0x80 | opcode, 0x80 | 126, n)
+        header = struct.pack("!BBH", b0, 0x80 | 126, n)
     else:
-        header = struct.pack("!BBQ", 0x80 | opcode, 0x80 | 127, n)
+        header = struct.pack("!BBQ", b0, 0x80 | 127, n)
     mask = os.urandom(4)
     return header + mask + xor_mask(payload, mask)
 
