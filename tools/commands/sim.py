@@ -10,6 +10,7 @@ from drive_server.pipeline import DriveConfig
 from tools.arguments import add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.errors import CommandError
+from tools.sim.pacing import hooks as on_frame_hooks
 from tools.sim.scenario import ScenarioConfig
 from tools.sim.summary import print_summary
 
@@ -110,14 +111,10 @@ def run(args: argparse.Namespace) -> int:
         video = VideoRecorder(args.video, fps)
         hooks.append(video)
 
-    def on_frame(event) -> None:
-        for hook in hooks:
-            hook(event)
-
     driver = _driver(args)
     progress = Progress(f"sim {args.track}")
     try:
-        result = run_scenario(config, driver, progress=progress, on_frame=on_frame if hooks else None)
+        result = run_scenario(config, driver, progress=progress, on_frame=on_frame_hooks(*hooks) if hooks else None)
     except (OSError, TimeoutError) as exc:  # refused, closed or silent drive server
         raise CommandError(f"driving with {driver.name} failed: {exc}",
                            "is drive_server running at that address?" if args.server else "") from exc
