@@ -109,3 +109,15 @@ def test_the_car_model_reaches_every_run_of_the_suite():
     assert base_scenario(SuiteConfig())["vehicle"] == ScenarioConfig.vehicle
     scenario = base_scenario(SuiteConfig(vehicle="dynamic"))
     assert scenario["vehicle"] == "dynamic" and ScenarioConfig(**scenario).vehicle == "dynamic"
+
+
+def test_the_ray_backend_without_ray_says_which_extra_to_install(monkeypatch):
+    import sys
+
+    from tools.errors import CommandError
+    from tools.evaluate.cluster import import_ray
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if the cluster extra were not installed
+    with pytest.raises(CommandError) as exc:
+        import_ray()
+    assert "[cluster]" in exc.value.hint
