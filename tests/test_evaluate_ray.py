@@ -130,3 +130,27 @@ def test_rbc_eval_backend_ray_equals_local_and_resumes(tmp_path, track):
 def test_address_without_the_ray_backend_is_a_one_line_error(tmp_path, track):
     proc = _eval(tmp_path / "x", track, "--address", "auto")
     assert proc.returncode == 2 and "--address" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_ctrl_c_under_ray_keeps_the_finished_runs_and_resume_completes(tmp_path):
+    """The bundled model drives this stadium, so the orientation search takes ~16 runs: time to press Ctrl-C."""
+    track = write_stadium(tmp_path, straight=60.0, radius=30.0, road_width=10.0)
+    out = tmp_path / "cut"
+    cmd = [sys.executable, "-m", "tools.cli", "eval", "--track", track, "--experiments", "no_variation", "orientation",
+           "--seeds", "1", "--workers", "2", "--backend", "ray", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    journal, deadline = out / "runs.jsonl", time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if journal.is_file() and journal.read_text().count("\n") >= 2:
+            break
+        time.sleep(0.02)
+    if proc.poll() is not None:
+        pytest.skip("the evaluation finished before it could be interrupted")
+    os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    journaled = [json.loads(line) for line in journal.read_text().splitlines()]
+    assert journaled and not any(r.get("interrupted") for r in journaled)
+    resumed = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=240)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert json.loads((out / "results.json").read_text())["meta"]["resumed_runs"] == len(journaled)
