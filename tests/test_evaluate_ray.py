@@ -41,16 +41,22 @@ def track(tmp_path_factory) -> str:
     return write_stadium(tmp_path_factory.mktemp("track"), straight=40.0, radius=20.0)
 
 
-def test_a_killed_worker_is_retried_and_the_results_equal_the_process_pool(tmp_path, track, local_ray):
+@pytest.fixture(scope="module")
+def pool_reference(tmp_path_factory, track) -> tuple[SuiteConfig, dict, list[dict]]:
+    """The suite on the process pool, run before Ray starts: forking a process that runs Ray can hang."""
+    cfg = SuiteConfig(track=track, experiments=("no_variation", "position"), seeds=2)
+    local = Runner(DriverSpec(model=str(default_model_path())), 2, tmp_path_factory.mktemp("pool") / "runs.jsonl")
+    try:
+        return cfg, run_suite(cfg, local, 2), local.records
+    finally:
+        local.close()
+
+
+def test_a_killed_worker_is_retried_and_the_results_equal_the_process_pool(tmp_path, pool_reference, local_ray):
     from tools.evaluate.cluster import RayRunner
 
     spec = DriverSpec(model=str(default_model_path()))
-    cfg = SuiteConfig(track=track, experiments=("no_variation", "position"), seeds=2)
-    local = Runner(spec, 2, tmp_path / "local.jsonl")
-    try:
-        local_summary = run_suite(cfg, local, 2)
-    finally:
-        local.close()
+    cfg, local_summary, local_records = pool_reference
 
     marker = tmp_path / "victim.pid"
 
@@ -79,8 +85,8 @@ def test_a_killed_worker_is_retried_and_the_results_equal_the_process_pool(tmp_p
     assert "WorkerCrashed" in runner.retried[0]["error"] or "died" in runner.retried[0]["error"].lower()
     assert ray_summary == local_summary
     journaled = [json.loads(line) for line in journal.read_text().splitlines()]
-    assert comparable(journaled) == comparable(local.records)  # every run journaled, none missing, none twice
-    assert len(journaled) == len(local.records)
+    assert comparable(journaled) == comparable(local_records)  # every run journaled, none missing, none twice
+    assert len(journaled) == len(local_records)
 
 
 def test_a_run_that_fails_every_attempt_is_reported_not_dropped(tmp_path, local_ray):
