@@ -2,109 +2,55 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from drive_server.models_dir import default_model_path
 from tests.conftest import write_stadium
-from tools.evaluate.runner import DriverSpec, Runner, record_key, run_task
-from tools.evaluate.suite import SuiteConfig, run_suite
+from tests.ray_cases import comparable
 
-ray = pytest.importorskip("ray", reason="Ray is not installed (pip extra: cluster)")
+if importlib.util.find_spec("ray") is None:  # found, not imported: the pytest process never starts Ray
+    pytest.skip("Ray is not installed (pip extra: cluster)", allow_module_level=True)
 
-TIMINGS = ("wall_time_s", "latency_ms_p50", "latency_ms_p99")  # the only fields that may differ per machine
-
-
-def comparable(records: list[dict]) -> dict[str, dict]:
-    """Records by task key, without their timings (and maps by file name): what 'identical results' means."""
-    return {record_key(r): {k: Path(v).name if k == "map" else v for k, v in r.items() if k not in TIMINGS}
-            for r in records}
+ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="module")
-def local_ray():
-    ray.init(num_cpus=2, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
-    yield
-    ray.shutdown()
+def ray_case(name: str, folder: Path) -> dict:
+    """One case of ``tests/ray_cases.py`` in its own interpreter (see its docstring for why)."""
+    proc = subprocess.run([sys.executable, "-m", "tests.ray_cases", name, str(folder)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_a_killed_worker_is_retried_and_the_results_equal_the_process_pool(tmp_path):
+    facts = ray_case("killed_worker", tmp_path)
+    assert [(r["experiment"], r["seed"], r["attempt"]) for r in facts["retried"]] == [("position", 1, 1)]
+    error = facts["retried"][0]["error"]
+    assert "WorkerCrashed" in error or "died" in error.lower()
+    assert facts["same_summary"]
+    assert facts["same_records"]  # every run journaled, none missing
+    assert facts["journaled"] == facts["pool_runs"]  # none twice
+
+
+def test_a_run_that_fails_every_attempt_is_reported_not_dropped(tmp_path):
+    facts = ray_case("lost_run", tmp_path)
+    assert re.search("failed 3 times.*simulator exploded.*--resume", facts["error"] or "")
+    assert facts["attempts"] == [1, 2]
+    assert facts["records"] == 0 and not facts["journal_exists"]
 
 
 @pytest.fixture(scope="module")
 def track(tmp_path_factory) -> str:
     return write_stadium(tmp_path_factory.mktemp("track"), straight=40.0, radius=20.0)
-
-
-@pytest.fixture(scope="module")
-def pool_reference(tmp_path_factory, track) -> tuple[SuiteConfig, dict, list[dict]]:
-    """The suite on the process pool, run before Ray starts: forking a process that runs Ray can hang."""
-    cfg = SuiteConfig(track=track, experiments=("no_variation", "position"), seeds=2)
-    local = Runner(DriverSpec(model=str(default_model_path())), 2, tmp_path_factory.mktemp("pool") / "runs.jsonl")
-    try:
-        return cfg, run_suite(cfg, local, 2), local.records
-    finally:
-        local.close()
-
-
-def test_a_killed_worker_is_retried_and_the_results_equal_the_process_pool(tmp_path, pool_reference, local_ray):
-    from tools.evaluate.cluster import RayRunner
-
-    spec = DriverSpec(model=str(default_model_path()))
-    cfg, local_summary, local_records = pool_reference
-
-    marker = tmp_path / "victim.pid"
-
-    def killable(spec: DriverSpec, task) -> dict:
-        """The first attempt of one run publishes its pid and waits to be SIGKILLed from outside."""
-        if task.experiment == "position" and task.seed == 1 and not marker.exists():
-            marker.write_text(str(os.getpid()))
-            time.sleep(120)
-        return run_task(spec, task)
-
-    journal = tmp_path / "ray.jsonl"
-    runner = RayRunner(spec, 2, journal, task_fn=killable)
-    result: dict = {}
-    suite = threading.Thread(target=lambda: result.update(summary=run_suite(cfg, runner, runner.workers)))
-    try:
-        suite.start()
-        deadline = time.monotonic() + 60
-        while not marker.exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        os.kill(int(marker.read_text()), signal.SIGKILL)  # the worker dies mid-run
-        suite.join(timeout=120)
-    finally:
-        runner.close()
-    ray_summary = result["summary"]
-    assert [(r["experiment"], r["seed"], r["attempt"]) for r in runner.retried] == [("position", 1, 1)]
-    assert "WorkerCrashed" in runner.retried[0]["error"] or "died" in runner.retried[0]["error"].lower()
-    assert ray_summary == local_summary
-    journaled = [json.loads(line) for line in journal.read_text().splitlines()]
-    assert comparable(journaled) == comparable(local_records)  # every run journaled, none missing, none twice
-    assert len(journaled) == len(local_records)
-
-
-def test_a_run_that_fails_every_attempt_is_reported_not_dropped(tmp_path, local_ray):
-    from tools.evaluate.cluster import RayRunner, RunLostError
-    from tools.evaluate.runner import Task
-
-    def broken(spec, task):
-        raise RuntimeError("simulator exploded")
-
-    runner = RayRunner(DriverSpec(model="unused.onnx"), 2, tmp_path / "runs.jsonl", retries=2, task_fn=broken)
-    try:
-        future = runner.submit(Task("position", "simplistic", 0.5, 3, {"seed": 3}))
-        with pytest.raises(RunLostError, match="failed 3 times.*simulator exploded.*--resume"):
-            future.result(timeout=60)
-    finally:
-        runner.close()
-    assert [r["attempt"] for r in runner.retried] == [1, 2]
-    assert runner.records == [] and not (tmp_path / "runs.jsonl").exists()
 
 
 def _eval(out: Path, track: str, *extra: str) -> subprocess.CompletedProcess:
