@@ -146,7 +146,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                         paths = [img_dir / frame_name(cam, when) for cam in cameras]
                         pending = paths
                         for cam, path in zip(cameras, paths, strict=True):
-                            path.write_bytes(encode_jpeg(sim.render(cam, jitter)))
+                            path.write_bytes(encode_jpeg(sim.render(cam, jitter), sim.jpeg_quality))
                         st = sim.vehicle.state
                         speed = from_kmh(st.speed * 3.6, config.speed_unit)
                         pending = []  # from here on an interrupt may orphan images, never a row
