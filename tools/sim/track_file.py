@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from tools.sim.geometry import closest_overlap
 from tools.sim.spline import resample_loop
 from tools.sim.track import (
     MIN_TURN_RADIUS,
@@ -181,25 +182,16 @@ def _control_points(raw: Any, r: Reader) -> np.ndarray:
 
 
 def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: float, r: Reader) -> None:
-    """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself.
-
-    Points further apart along the line than pi/2 * clearance must be at least ``clearance`` apart in
-    space; with curve radii >= clearance / 2 (checked before) closer pairs are always far enough apart.
-    """
-    step = max(1, int(1.0 / (length / len(pts))))  # check on a ~1 m grid
+    """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself
+    (the rule: :func:`tools.sim.geometry.closest_overlap`, checked on a ~1 m grid)."""
+    step = max(1, int(round(1.0 / (length / len(pts)))))
     p, ss = pts[::step], s[::step]
-    gap = math.pi / 2 * clearance
-    for lo in range(0, len(p), 512):
-        d = np.linalg.norm(p[lo:lo + 512, None] - p[None], axis=2)
-        along = np.abs(ss[lo:lo + 512, None] - ss[None])
-        along = np.minimum(along, length - along)
-        bad = (along > gap) & (d < clearance - 1e-6)
-        if bad.any():
-            i, j = np.unravel_index(int(np.argmin(np.where(bad, d, np.inf))), d.shape)
-            i += lo
-            what = "crosses itself" if d[i - lo, j] < 0.5 else "overlaps itself"
-            r.fail(f"road {what} near s={ss[i]:.0f} m and s={ss[j]:.0f} m (x={p[i, 0]:.1f}, y={p[i, 1]:.1f}): "
-                   f"centre lines {d[i - lo, j]:.1f} m apart, road plus shoulders need {clearance:.1f} m")
+    hit = closest_overlap(p, ss, length, clearance)
+    if hit is not None:
+        i, j, d = hit
+        what = "crosses itself" if d < 0.5 else "overlaps itself"
+        r.fail(f"road {what} near s={ss[i]:.0f} m and s={ss[j]:.0f} m (x={p[i, 0]:.1f}, y={p[i, 1]:.1f}): "
+               f"centre lines {d:.1f} m apart, road plus shoulders need {clearance:.1f} m")
 
 
 def _surface(item: Any, i: int, length: float, r: Reader, kinds: tuple[str, ...]) -> Surface:
