@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="reserved seed range: "
                    + ", ".join(f"{k} {r.start}-{r.stop - 1}" for k, r in SEED_RANGES.items())
                    + " (with --seed S: the S-th seed of the range)")
-    p.add_argument("--count", type=int, default=1, help="number of consecutive seeds")
+    p.add_argument("--count", type=int, default=1, help="number of consecutive seeds (default 1)")
     p.add_argument("--out", type=Path, default=None,
                    help="track file to write (with --count > 1: a folder of world-SEED.json files)")
     p.add_argument("--sheet", type=Path, default=None, help="contact sheet PNG of the worlds (camera frames and map)")

@@ -132,7 +132,7 @@ def paint_road(track: Track, img: np.ndarray, x0: float, y1: float, res: float, 
                     p.fill(p.band(s0, s1, -LINE_W / 2, LINE_W / 2), centre)
         elif kind in ("dirt", "gravel"):
             p.fill(p.band(s0, s1, -half - ASPHALT_EXTRA, half + ASPHALT_EXTRA), pal[kind])
-            rut, w = (pal["rut"], 0.25) if kind == "dirt" else (pal["gravel2"], 0.4)
+            rut, w = (pal["rut"], 0.25) if kind == "dirt" else (pal["gravel2"], 0.35)
             for d in (-0.75 * half, -0.25 * half, 0.25 * half, 0.75 * half):  # tyre ruts
                 p.fill(p.band(s0, s1, d - w, d + w), rut)
         elif kind == "bridge":

@@ -13,6 +13,7 @@ import numpy as np
 from tools.sim.themes import PALETTES, SKIES
 from tools.sim.worldgen.layout import DS, Layout
 
+COLOURED = ("ground", "ground2", "shoulder", "dirt", "water")  # the rest are greys: little hue change
 BASE_SURFACES = (("asphalt", 0.5), ("worn_asphalt", 0.15), ("concrete", 0.12), ("dirt", 0.12), ("gravel", 0.11))
 TREE_HEIGHTS = {"desert": (1.5, 4.0), "forest": (8.0, 17.0), "snow": (6.0, 14.0), "rocky": (3.0, 10.0)}
 DENSITY_PER_KM = (("bare", 0.12, 0, 0), ("sparse", 0.33, 30, 120), ("medium", 0.33, 120, 320),
@@ -24,8 +25,9 @@ def _pick(rng: np.random.Generator, table) -> str:
     return str(rng.choice(names, p=np.asarray(p) / sum(p)))
 
 
-def _jitter_rgb(rng: np.random.Generator, rgb, spread: float) -> list[int]:
-    gain = rng.uniform(1 - spread, 1 + spread) * rng.uniform(1 - spread / 2, 1 + spread / 2, 3)
+def _jitter_rgb(rng: np.random.Generator, rgb, spread: float, chroma: float = 0.5) -> list[int]:
+    """Brightness varied by +-spread, each channel by +-spread * chroma more."""
+    gain = rng.uniform(1 - spread, 1 + spread) * rng.uniform(1 - spread * chroma, 1 + spread * chroma, 3)
     return [int(np.clip(round(c * g), 0, 255)) for c, g in zip(rgb, gain, strict=True)]
 
 
@@ -134,7 +136,7 @@ def appearance(rng: np.random.Generator, theme: str) -> dict:
     blur = 0.0 if rng.uniform() < 0.5 else float(rng.uniform(0.3, 1.1))
     noise = 0.0 if rng.uniform() < 0.4 else float(rng.uniform(0.5, 4.0))
     return {"seed": int(rng.integers(2**31)),
-            "palette": {k: _jitter_rgb(rng, pal[k], 0.12) for k in keys},
+            "palette": {k: _jitter_rgb(rng, pal[k], 0.12, 0.5 if k in COLOURED else 0.12) for k in keys},
             "grain": round(float(rng.uniform(0.5, 1.6)), 3), "texture_scale": round(float(rng.uniform(0.6, 2.0)), 3),
             "exposure_ev": round(float(np.clip(rng.normal(0, 0.25), -0.6, 0.6)), 3),
             "contrast": round(float(rng.uniform(0.85, 1.2)), 3),
