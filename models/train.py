@@ -26,6 +26,7 @@ from torch import nn
 
 from drive_server import runrecords
 from drive_server.preprocess import to_input_tensor
+from models import distributed as ddp
 from models import runfiles
 from models.batches import Prefetcher, TrainingSet, epoch_batches
 from models.behavior import Pipeline
@@ -77,8 +78,18 @@ def default_threads(arch: str = "shallow") -> int:
 
 
 def train(config: TrainConfig, resume: bool = False) -> TrainResult:
+    """Train one run: one process, or (under torchrun) rank ``RANK`` of ``WORLD_SIZE`` with DDP."""
+    world = ddp.world_from_env()
+    ddp.init_world(world)
+    try:
+        return _train(config, resume, world)
+    finally:
+        ddp.close_world(world)
+
+
+def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
     run_dir = Path(config.out)
-    config = _resolve_config(config, run_dir, resume)
+    config = _resolve_config(config, run_dir, resume, world)
     pipeline = config.pipeline()
     epochs = config.epochs or pipeline.epochs
     torch.set_num_threads(config.threads or default_threads(config.arch))
@@ -97,14 +108,15 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     steps = steps_per_epoch(n_train, config.batch_size, config.aug_loops)
     if config.max_steps_per_epoch:
         steps = min(steps, config.max_steps_per_epoch)
-    if not (resume and checkpoint.exists()):
-        runrecords.write_json(run_dir / runfiles.CONFIG, config_record(config, pipeline, data, epochs, steps,
-                                                                         validation_steps(n_val, config.batch_size)))
+    if world.is_main and not (resume and checkpoint.exists()):
+        record = config_record(config, pipeline, data, epochs, steps, validation_steps(n_val, config.batch_size))
+        runrecords.write_json(run_dir / runfiles.CONFIG, record | {"world_size": world.size})
 
     log.info("%s", data.summary(config.data_options()))
     augmenter = FastAugmenter(data.cache, pipeline.augment)
     tset = TrainingSet(data.train, data.targets[data.train], data.has_sides[data.train], pipeline.deletion_rate,
                        config.batch_size)
+    tset = ddp.shard(tset, world)  # this rank's samples and share of the batch (all of both in one process)
     log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
              config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,
              count_parameters(model))
@@ -112,7 +124,8 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
     wall = time.perf_counter()
     with _StopFlag() as stop:
         while state.epoch < epochs:
-            done = _train_epoch(model, optimizer, augmenter, tset, config, state, steps, stop, checkpoint, best)
+            done = _train_epoch(model, optimizer, augmenter, tset, config, state, steps, stop, checkpoint, best,
+                                world)
             trained += done
             if stop.requested and state.step < steps:
                 log.warning("interrupted at epoch %d step %d: checkpoint saved; continue with --resume",
@@ -128,12 +141,16 @@ def train(config: TrainConfig, resume: bool = False) -> TrainResult:
                 best = copy.deepcopy(model.state_dict())
                 state.best_epoch, state.best_val = state.epoch + 1, val_loss
             state = replace(state, epoch=state.epoch + 1, step=0, loss_sum=0.0, loss_count=0, epoch_seconds=0.0)
-            runfiles.write_history(run_dir / runfiles.HISTORY, state.history)
-            save_checkpoint(checkpoint, model, optimizer, state, config, best)
+            if world.is_main:
+                runfiles.write_history(run_dir / runfiles.HISTORY, state.history)
+                save_checkpoint(checkpoint, model, optimizer, state, config, best)
             if stop.requested and state.epoch < epochs:
                 log.warning("interrupted after epoch %d: checkpoint saved; continue with --resume", state.epoch)
                 return TrainResult(run_dir, state.history, None, None, None, interrupted=True)
     rate = trained * config.batch_size / max(1e-9, time.perf_counter() - wall)
+    if not world.is_main:  # rank 0 exports; the others trained the same weights
+        return TrainResult(run_dir, state.history, None, state.best_val, None, samples_per_s=rate,
+                           info={"rank": world.rank})
     return _finish(model, data, pipeline, config, state, run_dir, rate, best)
 
 
@@ -158,7 +175,7 @@ def evaluate(model: nn.Module, data: PreparedData, pipeline: Pipeline, batch_siz
 
 def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: FastAugmenter, tset: TrainingSet,
                  config: TrainConfig, state: State, steps: int, stop: _StopFlag, checkpoint: Path,
-                 best: dict | None) -> int:
+                 best: dict | None, world: ddp.World = ddp.SINGLE) -> int:
     """Train from ``state.step`` to the end of the epoch (or a Ctrl-C); returns the steps done."""
     from tqdm import tqdm
 
@@ -166,7 +183,9 @@ def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: 
         torch.manual_seed(config.seed * 1009 + state.epoch)
     model.train()
     loss_fn = nn.MSELoss()
-    source = Prefetcher(epoch_batches(augmenter, tset, config.seed, state.epoch, state.step, steps))
+    source = Prefetcher(epoch_batches(augmenter, tset, ddp.rank_seed(config.seed, world), state.epoch, state.step,
+                                      steps))
+    net = ddp.wrap(model, world)
     bar = tqdm(total=steps, initial=state.step, desc=f"epoch {state.epoch + 1}", unit="step", leave=False,
                disable=not config.progress, dynamic_ncols=True)
     started = time.perf_counter() - state.epoch_seconds
@@ -174,22 +193,22 @@ def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: 
     done = 0
     try:
         for step, x, y in source:
-            optimizer.zero_grad(set_to_none=True)
-            loss = loss_fn(model(torch.from_numpy(x)), torch.from_numpy(y))
-            loss.backward()
-            optimizer.step()
-            state.loss_sum += loss.item()
+            state.loss_sum += ddp.train_step(net, optimizer, loss_fn, torch.from_numpy(x), torch.from_numpy(y))
             state.loss_count += 1
             state.step = step + 1
             done += 1
             if state.step % 20 == 0:
                 bar.set_postfix(mse=f"{state.loss_sum / state.loss_count:.4f}", refresh=False)
             bar.update(1)
-            if stop.requested or time.perf_counter() - last_save > CHECKPOINT_EVERY_S:
+            stopping = ddp.agree(stop.requested, world)  # every rank stops at the same step
+            if stopping or time.perf_counter() - last_save > CHECKPOINT_EVERY_S:
                 state.epoch_seconds = time.perf_counter() - started
-                save_checkpoint(checkpoint, model, optimizer, state, config, best)
+                if world.is_main:
+                    save_checkpoint(checkpoint, model, optimizer, state, config, best)
                 last_save = time.perf_counter()
-                if stop.requested:
+                if stopping:
+                    if not stop.requested:  # another rank's Ctrl-C: this one stops at the same step
+                        stop.requested = True
                     break
     finally:
         source.close()
@@ -238,7 +257,7 @@ def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
         return prepare_data(config.data, pipeline, config.seed, config.data_options(), workers, progress)
 
 
-def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool) -> TrainConfig:
+def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool, world: ddp.World = ddp.SINGLE) -> TrainConfig:
     stored_path = run_dir / runfiles.CONFIG
     if resume:
         if not stored_path.exists():
@@ -246,7 +265,7 @@ def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool) -> TrainCo
         stored = TrainConfig.from_dict(json.loads(stored_path.read_text(encoding="utf-8"))["config"])
         return replace(stored, out=str(run_dir), threads=config.threads, decode_workers=config.decode_workers,
                        progress=config.progress)
-    if (run_dir / runfiles.CHECKPOINT).exists() or (run_dir / runfiles.MODEL).exists():
+    if world.is_main and ((run_dir / runfiles.CHECKPOINT).exists() or (run_dir / runfiles.MODEL).exists()):
         raise RunDirError(f"{run_dir} already holds a run: pass --resume to continue it, or choose another --out")
     if not config.data:
         raise RunDirError("no --data given")

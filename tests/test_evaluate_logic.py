@@ -109,3 +109,30 @@ def test_the_car_model_reaches_every_run_of_the_suite():
     assert base_scenario(SuiteConfig())["vehicle"] == ScenarioConfig.vehicle
     scenario = base_scenario(SuiteConfig(vehicle="dynamic"))
     assert scenario["vehicle"] == "dynamic" and ScenarioConfig(**scenario).vehicle == "dynamic"
+
+
+def test_the_ray_backend_without_ray_says_which_extra_to_install(monkeypatch):
+    import sys
+
+    from tools.errors import CommandError
+    from tools.evaluate.cluster import import_ray
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if the cluster extra were not installed
+    with pytest.raises(CommandError) as exc:
+        import_ray()
+    assert "[cluster]" in exc.value.hint
+
+
+def test_projection_replays_the_eta_phase_then_the_search_chains():
+    from tools.evaluate.projection import project
+
+    runs = [{"experiment": "no_variation", "value": None, "wall_time_s": t} for t in (3.0, 3.0, 2.0)]
+    runs += [{"experiment": "orientation", "value": v, "wall_time_s": 1.0} for v in (5.0, 10.0, -5.0)]
+    runs += [{"experiment": "speed_limit", "value": v, "wall_time_s": 4.0} for v in (30.0, 35.0)]
+    results = {"runs": runs, "summary": {"no_variation": {"measure": "eta"},
+                                         "orientation": {"measure": "range", "origin": 0.0},
+                                         "speed_limit": {"measure": "max", "origin": 30.0}}}
+    one, two, many = (project(results, w) for w in (1, 2, 64))
+    assert one.wall_s == 8.0 + 11.0  # every run in a row
+    assert (two.eta_phase_s, two.search_phase_s) == (5.0, 9.0)  # the searches start in order: speed waits 1 s
+    assert (many.eta_phase_s, many.search_phase_s) == (3.0, 8.0)  # the speed-limit chain: 8 s of runs in a row

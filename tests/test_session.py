@@ -122,7 +122,7 @@ def test_vehicle_flag_shows_its_default(command, capsys):
     with pytest.raises(SystemExit):
         main([command, "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "--vehicle {kinematic,dynamic}" in text and f"(default {ScenarioConfig.vehicle})" in text
+    assert "--vehicle {dynamic,kinematic}" in text and f"(default {ScenarioConfig.vehicle})" in text
 
 
 # -------------------------------------------------------------------------- end to end, real drive server

@@ -71,5 +71,5 @@ def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
     from tools.sim.vehicle import VEHICLE_KINDS
 
     parser.add_argument("--vehicle", choices=VEHICLE_KINDS, default=default,
-                        help="car model: kinematic bicycle, or dynamic single-track with tyre slip "
+                        help="car model: dynamic single-track with tyre slip, or the kinematic bicycle "
                              "(default %(default)s)")

@@ -14,10 +14,11 @@ from drive_server.runrecords import code_version, file_sha256, write_json, write
 from tools.arguments import add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError
+from tools.evaluate.cluster import BACKENDS, make_runner
 from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS, SETUPS
 from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
-from tools.evaluate.runner import DriverSpec, Runner, spec_dict
+from tools.evaluate.runner import DriverSpec, spec_dict
 from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
 from tools.sim.track_file import get_track
 
@@ -31,7 +32,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="decides the track (lake / mountain / lake with 20 cones) and the experiments")
     p.add_argument("--server", help="drive through a running drive_server at this URL instead of in-process "
                                     "(the speed-limit experiment is then skipped: the limit is the server's)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel simulator processes")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="parallel simulator processes (with --backend ray and --address: the cluster's CPUs)")
+    p.add_argument("--backend", choices=BACKENDS, default="local",
+                   help="local: a process pool on this machine; ray: one Ray task per run (pip extra: cluster)")
+    p.add_argument("--address", help="with --backend ray: the cluster to join (auto, or HOST:6379 of "
+                                     "`ray start --head`); default: a private Ray instance on this machine")
     p.add_argument("--seeds", type=int, default=d.seeds,
                    help="seeds per eta experiment, mean ± std (default %(default)s)")
     p.add_argument("--seed", type=int, default=d.base_seed, help="first seed (default %(default)s)")
@@ -84,11 +90,13 @@ def run(args: argparse.Namespace) -> int:
             "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}
 
     bar = RunProgress(max_runs(cfg))
-    runner = Runner(spec, args.workers, journal, on_result=bar.record, reuse=reuse)
+    runner = make_runner(args.backend, spec, args.workers, journal, on_result=bar.record, reuse=reuse,
+                         address=args.address)
+    meta.update(backend=args.backend, workers=runner.workers)
     started = time.perf_counter()
     summary, interrupted = {}, False
     try:
-        summary = run_suite(cfg, runner, args.workers)
+        summary = run_suite(cfg, runner, runner.workers)
     except KeyboardInterrupt:
         interrupted = True
         log.warning("interrupted: keeping the %d finished runs", len(runner.records))
@@ -97,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         bar.close(finished=not interrupted)
     wall = time.perf_counter() - started
     meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records),
-                resumed_runs=runner.reused)
+                resumed_runs=runner.reused, retried=runner.retried)
     write_json(out / "results.json", {"meta": meta, "summary": summary, "runs": runner.records})
     if interrupted:
         print(f"interrupted after {wall:.0f} s; {len(runner.records)} finished runs in {out / 'results.json'} "
@@ -106,8 +114,9 @@ def run(args: argparse.Namespace) -> int:
     write_text(out / "table9.md", table9({args.behavior: summary}))
     plots = plot_experiments(summary, runner.records, out)
     resumed = f" ({runner.reused} reused from the journal)" if runner.reused else ""
+    retried = f", {len(runner.retried)} failed attempts retried (results.json meta.retried)" if runner.retried else ""
     print(f"\nRobustness of {model.name} ({args.behavior}), {len(runner.records)} runs{resumed}, "
-          f"{args.workers} workers, wall {wall:.0f} s")
+          f"{runner.workers} workers ({args.backend}){retried}, wall {wall:.0f} s")
     width = max(len(e.title) for e in EXPERIMENTS)
     for exp in EXPERIMENTS:
         if exp.key in summary:

@@ -66,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
                          smooth_labels=args.smooth_labels,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
+    if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)
+        return 0
     if "summary" in result.info:
         print(result.info["summary"])
     for row in result.history:

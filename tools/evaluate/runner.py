@@ -151,9 +151,19 @@ class Runner:
         self.on_result = on_result
         self.records: list[dict[str, Any]] = []
         self.reused = 0
+        self.workers = max(1, workers)  # runs at once (a cluster backend sets its own)
+        self.retried: list[dict[str, Any]] = []  # runs a backend retried after a failure, for the record
         self._reuse = dict(reuse or {})
         self._lock = threading.Lock()
-        self._pool = ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_worker)
+        self._pool = self._start(workers)
+
+    def _start(self, workers: int) -> Any:
+        """The execution engine (here a local process pool); a backend subclass starts its own."""
+        return ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_worker)
+
+    def _launch(self, task: Task) -> Future:
+        """Start one run on the engine; the future's result is the run record."""
+        return self._pool.submit(run_task, self.spec, task)
 
     def submit(self, task: Task) -> Future:
         done = self._reuse.pop(task_key(task.experiment, task.value, task.seed, task.scenario), None)
@@ -166,7 +176,7 @@ class Runner:
             if self.on_result:
                 self.on_result(done)
             return future
-        future = self._pool.submit(run_task, self.spec, task)
+        future = self._launch(task)
         future.add_done_callback(self._record)
         return future
 
@@ -177,7 +187,10 @@ class Runner:
     def _record(self, future: Future) -> None:
         if future.cancelled() or future.exception() is not None:
             return
-        record = future.result()
+        self._keep(future.result())
+
+    def _keep(self, record: dict[str, Any]) -> None:
+        """Journal a finished run and tell ``on_result``."""
         if record.get("interrupted"):
             # Ctrl-C reaches the workers too, and the simulator returns the run so far: eta 0 for a run
             # that never failed. Neither journaled (a resume would reuse it) nor counted as a result.

@@ -22,7 +22,7 @@ from protocol import MAX_STEERING_DEG
 MPS_PER_KMH = 1.0 / 3.6
 GRAVITY_MPS2 = 9.81
 #: The car models ``ScenarioConfig.vehicle`` chooses from; the first is the default.
-VEHICLE_KINDS = ("kinematic", "dynamic")
+VEHICLE_KINDS = ("dynamic", "kinematic")
 
 
 def kmh_to_mps(speed_kmh: float) -> float:
