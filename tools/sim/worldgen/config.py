@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, fields
+from pathlib import Path
 
 from tools.sim.track import MIN_TURN_RADIUS, THEMES
 
@@ -73,3 +75,23 @@ def seed_label(seed: int) -> str:
         return "in no reserved range"
     r = SEED_RANGES[name]
     return f"{name} range {r.start:,}-{r.stop - 1:,}"
+
+
+def parse_world_config(text: str) -> WorldGenConfig:
+    """A :class:`WorldGenConfig` from a JSON object of its fields (inline, or a file holding one)."""
+    source = Path(text).read_text(encoding="utf-8") if not text.lstrip().startswith("{") else text
+    try:
+        values = json.loads(source)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"world config is not JSON: {exc}") from None
+    known = {f.name for f in fields(WorldGenConfig)}
+    if not isinstance(values, dict) or set(values) - known:
+        unknown = sorted(set(values) - known) if isinstance(values, dict) else []
+        raise ValueError(f"world config must be a JSON object of WorldGenConfig fields ({', '.join(sorted(known))})"
+                         + (f"; unknown: {', '.join(unknown)}" if unknown else ""))
+    try:
+        if "themes" in values:
+            values["themes"] = tuple(values["themes"])
+        return WorldGenConfig(**values)
+    except TypeError as exc:
+        raise ValueError(f"world config: {exc}") from None
