@@ -126,3 +126,29 @@ def test_the_ray_backend_gives_the_local_data_set(tmp_path):
     assert _log(tmp_path / "ray") == _log(tmp_path / "local")
     assert (tmp_path / "ray" / "worlds.csv").read_bytes() == (tmp_path / "local" / "worlds.csv").read_bytes()
     assert len(list((tmp_path / "ray" / "IMG").iterdir())) == len(list((tmp_path / "local" / "IMG").iterdir()))
+
+
+def test_a_real_ctrl_c_stops_every_worker_and_resume_completes(tmp_path):
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "cut"
+    args = [sys.executable, "-m", "tools.cli", "collect", "--worlds", "4", "--world-seed", "30", "--cameras", "1",
+            "--rate-hz", "5", "--laps", "2", "--world-config", SHORT_JSON, "--workers", "2", "--out", str(out)]
+    proc = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None and not list(out.glob(".partial/world-*/done.json")):
+        time.sleep(0.02)
+    if proc.poll() is not None:
+        pytest.skip("the collection finished before it could be interrupted")
+    os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C: the driver and its workers
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr[-3000:]
+    assert "--resume" in stdout and not (out / "driving_log.csv").exists()
+    resumed = subprocess.run([*args, "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=240)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    samples, report = read_log(out)
+    assert not report.skipped and len(list((out / "IMG").iterdir())) == len(samples)
+    assert [int(w["world_seed"]) for w in csv.DictReader((out / "worlds.csv").open())] == [30, 31, 32, 33]

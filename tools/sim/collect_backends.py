@@ -10,12 +10,13 @@ files, which :func:`unpack` writes where the local backends would have.
 from __future__ import annotations
 
 import datetime as dt
+import itertools
 import logging
 import os
 import tempfile
 import time
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -110,10 +111,19 @@ def _local(jobs: list[WorldJob], workers: int) -> Iterator[tuple[WorldJob, World
             yield job, collect_world(job)
         return
     pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), initializer=_init_worker)
+    waiting = iter(jobs)
+    running: dict[Future, WorldJob] = {}
     try:
-        futures = {pool.submit(collect_world, job): job for job in jobs}
-        for future in as_completed(futures):
-            yield futures[future], future.result()
+        # at most one world per worker in flight (none queued), so after Ctrl-C no world starts
+        for job in itertools.islice(waiting, workers):
+            running[pool.submit(collect_world, job)] = job
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                job = running.pop(future)
+                yield job, future.result()
+                for following in itertools.islice(waiting, 1):
+                    running[pool.submit(collect_world, following)] = following
     finally:  # Ctrl-C reaches the workers too: they stop their world (kept out of the journal) and exit
         pool.shutdown(wait=True, cancel_futures=True)
 
