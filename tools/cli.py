@@ -52,6 +52,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "hostile-client campaign against drive_server; healthy latency beside it"),
     Subcommand("replay", "tools.commands.replay",
                "replay a driving log to a drive server as the Unity simulator would"),
+    Subcommand("score", "tools.commands.score",
+               "open-loop scores of models on a recorded driving log (e.g. real Unity frames)"),
     Subcommand("world", "tools.commands.world", "write procedural worlds (track files) or a contact sheet of them"),
     Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),
     Subcommand("train-bench", "tools.commands.train_bench", "augmentation and training throughput; projected paper run",
