@@ -22,3 +22,9 @@ def bundled_model_path(behavior: str = "simplistic") -> Path:
     if behavior not in BEHAVIORS:
         raise ValueError(f"unknown behavior {behavior!r}; bundled models: {', '.join(BEHAVIORS)}")
     return Path(str(resources.files(PRETRAINED_PACKAGE) / f"{behavior}.onnx"))
+
+
+def bundled_models() -> list[Path]:
+    """Every bundled ONNX model, by name."""
+    folder = resources.files(PRETRAINED_PACKAGE)
+    return sorted(Path(str(folder / p.name)) for p in folder.iterdir() if p.name.endswith(".onnx"))

@@ -37,3 +37,40 @@ def test_eval_over_the_socket_writes_results_and_table(tmp_path, shallow_onnx):
     table = (out / "table9.md").read_text()
     assert "| No variation |" in table and "Vehicle orientation variation" in table
     assert "Robustness of shallow.onnx" in proc.stdout
+
+
+WORLDS_CONFIG = '{"min_length_m": 200, "max_length_m": 400, "drive_check": false}'  # 0.2-0.4 km loops
+
+
+def test_unseen_worlds_over_the_socket_two_tiny_worlds(tmp_path):
+    """The experiment beyond the paper: two generated evaluation worlds, the bundled model on the real server."""
+    from drive_server.models_dir import default_model_path
+
+    out = tmp_path / "eval"
+    with ServerProcess(default_model_path(), ["--log-every", "0"]) as server:
+        proc = subprocess.run(
+            [sys.executable, "-m", "tools.cli", "eval", "--server", server.url, "--experiments", "unseen_worlds",
+             "--worlds", "2", "--world-config", WORLDS_CONFIG, "--workers", "2", "--out", str(out)],
+            capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    results = json.loads((out / "results.json").read_text())
+    worlds = results["meta"]["worlds"]
+    assert worlds["seeds"] == [1_000_000, 1_000_001] and worlds["seed_range"] == "eval"
+    assert worlds["config"]["max_length_m"] == 400 and worlds["generator_version"] >= 1
+    assert sorted(p.name for p in (out / "worlds").iterdir()) == ["world-1000000.json", "world-1000001.json"]
+    runs = results["runs"]
+    assert sorted(r["value"] for r in runs) == worlds["seeds"] and {r["seed"] for r in runs} == {0}
+    assert {r["config"]["track"] for r in runs} == set(worlds["files"].values())
+    entry = results["summary"]["unseen_worlds"]
+    assert entry["n"] == 2 and entry["worst"]["eta"] == min(w["eta"] for w in entry["worlds"])
+    for w in entry["worlds"]:  # every failed run has its trajectory map
+        assert w["autonomous"] or (w["map"] and (out / "failures" / f"unseen_worlds_{w['seed']}_seed0.png").is_file())
+    assert list(results["summary"]) == ["unseen_worlds"]  # nothing else ran
+    row = next(line for line in (out / "table9.md").read_text().splitlines() if "Unseen generated worlds" in line)
+    assert "over 2 worlds" in row and (out / "unseen_worlds.png").is_file()
+    assert "Unseen generated worlds (beyond the paper)" in proc.stdout
+    table = tmp_path / "table9.md"
+    compare = subprocess.run([sys.executable, "-m", "tools.cli", "compare", "--layout", "table9", "--eval", str(out),
+                              "--out", str(table)], capture_output=True, text=True, timeout=60)
+    assert compare.returncode == 0, compare.stderr[-2000:]
+    assert "| Unseen generated worlds (beyond the paper) | η = " in table.read_text()

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import write_stadium
-from tests.ray_cases import comparable
+from tests.ray_cases import TIMINGS, comparable
 
 if importlib.util.find_spec("ray") is None:  # found, not imported: the pytest process never starts Ray
     pytest.skip("Ray is not installed (pip extra: cluster)", allow_module_level=True)
@@ -106,3 +106,22 @@ def test_ctrl_c_under_ray_keeps_the_finished_runs_and_resume_completes(tmp_path)
     resumed = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=240)
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert json.loads((out / "results.json").read_text())["meta"]["resumed_runs"] == len(journaled)
+
+
+
+def test_unseen_worlds_under_ray_equal_the_process_pool(tmp_path):
+    """The world documents travel with the tasks; the records are the process pool's (but for the track path)."""
+    def unseen(out: Path, *extra: str) -> dict:
+        proc = subprocess.run(
+            [sys.executable, "-m", "tools.cli", "eval", "--experiments", "unseen_worlds", "--worlds", "2",
+             "--world-seed", "1000010", "--world-config", '{"min_length_m": 200, "max_length_m": 400, '
+             '"drive_check": false}', "--workers", "2", "--out", str(out), *extra],
+            capture_output=True, text=True, timeout=240)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        results = json.loads((out / "results.json").read_text())
+        skip = {"map", "config", "scenario", *TIMINGS}  # config and scenario name the track file, under --out
+        return {"meta": results["meta"]["worlds"]["sha256"], "summary": results["summary"]["unseen_worlds"]["n"],
+                "runs": {r["value"]: {k: v for k, v in r.items() if k not in skip} for r in results["runs"]}}
+
+    local, ray = unseen(tmp_path / "local"), unseen(tmp_path / "ray", "--backend", "ray")
+    assert ray == local and ray["summary"] == 2

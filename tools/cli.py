@@ -52,6 +52,9 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "hostile-client campaign against drive_server; healthy latency beside it"),
     Subcommand("replay", "tools.commands.replay",
                "replay a driving log to a drive server as the Unity simulator would"),
+    Subcommand("score", "tools.commands.score",
+               "open-loop scores of models on a recorded driving log (e.g. real Unity frames)"),
+    Subcommand("world", "tools.commands.world", "write procedural worlds (track files) or a contact sheet of them"),
     Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),
     Subcommand("train-bench", "tools.commands.train_bench", "augmentation and training throughput; projected paper run",
                "train"),
@@ -105,7 +108,7 @@ def subcommand_parser(cmd: Subcommand, module: ModuleType) -> argparse.ArgumentP
 
 
 #: Argument names of output paths: created by a command, removed again if it fails leaving them empty.
-OUTPUT_ARGS = ("out", "json", "map", "strip", "video")
+OUTPUT_ARGS = ("out", "json", "map", "strip", "video", "sheet")
 
 
 def main(argv: list[str] | None = None) -> int:

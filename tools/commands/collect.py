@@ -1,21 +1,27 @@
-"""``rbc collect``: record a Udacity-format training set with the autopilot on the headless simulator."""
+"""``rbc collect``: record a Udacity-format training set with the autopilot on the headless simulator.
+
+With ``--worlds N`` over N procedural training worlds at once (:mod:`tools.sim.collect_worlds`).
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 from pathlib import Path
 
 from tools.arguments import add_speed_unit_argument, add_vehicle_argument
-from tools.console import Progress
+from tools.console import Progress, bar
+from tools.errors import CommandError
 from tools.sim.collect import CollectConfig
+from tools.sim.collect_backends import BACKENDS
 
 log = logging.getLogger("rbc.collect")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = CollectConfig  # the defaults, defined once
-    p.add_argument("--track", default=d.track, help="built-in track name or track JSON path (default %(default)s)")
+    p.add_argument("--track", default=None, help=f"built-in track name or track JSON path (default {d.track})")
     p.add_argument("--laps", type=int, default=d.laps, help="laps per direction (default %(default)s)")
     p.add_argument("--out", type=Path, required=True, help="output folder (driving_log.csv + IMG/)")
     p.add_argument("--both-directions", action="store_true",
@@ -39,16 +45,91 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     group = p.add_mutually_exclusive_group()
     group.add_argument("--overwrite", action="store_true", help="replace an existing log and IMG/ in --out")
     group.add_argument("--append", action="store_true", help="add rows to an existing log in --out")
+    group.add_argument("--resume", action="store_true",
+                       help="with --worlds: continue an interrupted collection in --out (finished worlds are kept)")
+    w = p.add_argument_group("procedural worlds (instead of --track)")
+    w.add_argument("--worlds", type=int, default=None, metavar="N",
+                   help="collect over N generated worlds, seeds --world-seed .. +N-1, into one data set "
+                        "(worlds.csv says which world every row is from; the track files go to OUT/worlds/)")
+    w.add_argument("--world-seed", type=int, default=0, metavar="S", help="first world seed (default %(default)s)")
+    w.add_argument("--allow-eval-worlds", action="store_true",
+                   help="allow seeds outside the training range 0-999999 (held-out worlds: never train on them)")
+    w.add_argument("--world-config", default=None, metavar="JSON",
+                   help='generator settings, a JSON object of WorldGenConfig fields or a file holding one, '
+                        'e.g. \'{"max_length_m": 800}\' (default: the documented distribution)')
+    w.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worlds collected at once (default: all cores)")
+    w.add_argument("--backend", choices=BACKENDS, default="local",
+                   help="local: worker processes here; ray: one Ray task per world (pip extra: cluster)")
+    w.add_argument("--address", help="with --backend ray: the cluster to join (default: a private Ray instance)")
 
 
-def run(args: argparse.Namespace) -> int:
-    from tools.sim.collect import collect
-
-    config = CollectConfig(
-        track=args.track, laps=args.laps, both_directions=args.both_directions, cones=args.cones,
+def _config(args: argparse.Namespace) -> CollectConfig:
+    return CollectConfig(
+        track=args.track or CollectConfig.track, laps=args.laps, both_directions=args.both_directions, cones=args.cones,
         cone_seed=args.cone_seed, cameras=args.cameras, rate_hz=args.rate_hz, seed=args.seed,
         speed_kmh=args.speed_kmh, speed_unit=args.speed_unit, light_intensity=args.light_intensity,
         light_direction_deg=args.light_direction, vehicle=args.vehicle)
+
+
+def _worlds(args: argparse.Namespace) -> int:
+    from tools.sim.collect_worlds import WorldsConfig, collect_worlds, training_seed_problem
+    from tools.sim.worldgen.config import WorldGenConfig, parse_world_config
+
+    if args.track or args.append:
+        raise CommandError("--worlds collects over generated worlds: leave out --track and --append",
+                           "one --out per collection; --resume continues an interrupted one")
+    problem = training_seed_problem(args.world_seed, args.worlds) if args.world_seed >= 0 and args.worlds > 0 else None
+    if problem and not args.allow_eval_worlds:
+        raise CommandError(problem, "choose --world-seed in the training range, or pass --allow-eval-worlds")
+    if problem:
+        log.warning("%s (--allow-eval-worlds given)", problem)
+    generator = parse_world_config(args.world_config) if args.world_config else WorldGenConfig()
+    worlds = WorldsConfig(args.world_seed, args.worlds, args.allow_eval_worlds, generator)
+    progress = bar(args.worlds, "worlds", "world")
+
+    def on_world(outcome, done: int, total: int) -> None:
+        log.info("world %d: %d rows, %d intervention(s) (%d/%d worlds)", outcome.seed, outcome.rows,
+                 outcome.interventions, done, total)
+        if progress is not None:
+            progress.update(done - progress.n)
+
+    try:
+        result = collect_worlds(_config(args), worlds, args.out, workers=args.workers, backend=args.backend,
+                                address=args.address, overwrite=args.overwrite, resume=args.resume,
+                                on_world=on_world)
+    finally:
+        if progress is not None:
+            progress.close()
+    print(f"{'world':>9}  {'rows':>6}  {'interventions':>13}  {'laps':>4}  {'simulated':>9}  track sha256")
+    for o in result.outcomes:
+        causes = f"  ({', '.join(f'{n} {c}' for c, n in o.causes.items())})" if o.causes else ""
+        print(f"{o.seed:>9}  {o.rows:>6}  {o.interventions:>13}  {o.laps:>4}  {o.sim_time_s:>8.0f}s  "
+              f"{o.track_sha256[:12]}{causes}")
+    failed = [o.seed for o in result.outcomes if o.interventions]
+    done = len(result.outcomes)
+    resumed = f", {result.resumed} from an earlier run" if result.resumed else ""
+    if result.interrupted:
+        print(f"interrupted: {done} of {result.total} worlds collected{resumed}; no log written yet "
+              f"(continue with the same command plus --resume)")
+        return 130
+    print(f"log         {result.out_dir / 'driving_log.csv'} ({result.rows} rows from {done} worlds{resumed}, "
+          f"{args.cameras} camera{'s' if args.cameras > 1 else ''}; worlds.csv maps rows to worlds)")
+    print(f"time        {result.wall_time_s:.1f} s wall, {args.workers} worker(s) ({args.backend})")
+    if failed:
+        print(f"interventions in {len(failed)} world(s): {', '.join(map(str, failed))} (the log has a jump there)")
+    return 1 if failed else 0
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.worlds is not None:
+        return _worlds(args)
+    if args.resume:
+        raise CommandError("--resume continues a --worlds collection", "add --worlds N --world-seed S")
+    from tools.sim.collect import collect
+
+    config = _config(args)
+    args.track = config.track
     progress = Progress(f"collect {args.track}")
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)

@@ -15,12 +15,20 @@ from tools.arguments import add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError
 from tools.evaluate.cluster import BACKENDS, make_runner
-from tools.evaluate.experiments import AUTONOMY_RULE, BEHAVIORS, EXPERIMENTS, SETUPS
+from tools.evaluate.experiments import (
+    AUTONOMY_RULE,
+    BEHAVIORS,
+    DEFAULT_UNSEEN_WORLDS,
+    EXPERIMENTS,
+    PAPER_EXPERIMENTS,
+    SETUPS,
+)
 from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, spec_dict
 from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
 from tools.sim.track_file import get_track
+from tools.sim.worldgen import world_seed_range
 
 log = logging.getLogger("rbc.eval")
 
@@ -42,8 +50,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="seeds per eta experiment, mean ± std (default %(default)s)")
     p.add_argument("--seed", type=int, default=d.base_seed, help="first seed (default %(default)s)")
     p.add_argument("--laps", type=int, default=d.laps, help="laps per run (default %(default)s)")
-    p.add_argument("--experiments", nargs="+", choices=[e.key for e in EXPERIMENTS],
-                   default=[e.key for e in EXPERIMENTS], help="subset of the experiments")
+    p.add_argument("--experiments", nargs="+", choices=[e.key for e in EXPERIMENTS] + ["all"],
+                   default=list(PAPER_EXPERIMENTS), metavar="EXPERIMENT",
+                   help="which experiments: " + ", ".join(e.key for e in EXPERIMENTS) + ", or all "
+                        "(default: the paper's eight; unseen_worlds, beyond the paper, only when named)")
+    p.add_argument("--worlds", type=int, default=DEFAULT_UNSEEN_WORLDS, metavar="K",
+                   help="unseen_worlds: generated evaluation worlds, one run each at --seed (default %(default)s)")
+    p.add_argument("--world-seed", type=int, default=None, metavar="S",
+                   help="unseen_worlds: first world seed, in the evaluation range "
+                        f"{world_seed_range('eval').start}-{world_seed_range('eval').stop - 1} (default: its start)")
+    p.add_argument("--world-config", default=None, metavar="JSON",
+                   help="unseen_worlds: generator settings, a JSON object of WorldGenConfig fields or a file "
+                        "holding one (default: the documented distribution)")
     p.add_argument("--track", help="override the behavior's track (name or JSON file)")
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
                    help="km/h for every experiment but the speed one (default %(default)s)")
@@ -62,11 +80,25 @@ def _model_path(args: argparse.Namespace) -> Path:
     return bundled_model_path(args.behavior)
 
 
+def _worlds(args: argparse.Namespace, out: Path) -> dict:
+    """Generate the unseen worlds into ``out/worlds`` (on this machine, before any run)."""
+    from tools.evaluate.worlds import eval_world_seeds, write_eval_worlds
+    from tools.sim.worldgen.config import WorldGenConfig, parse_world_config
+
+    seeds = eval_world_seeds(args.worlds, args.world_seed)
+    config = parse_world_config(args.world_config) if args.world_config else WorldGenConfig()
+    started = time.perf_counter()
+    meta = write_eval_worlds(out, seeds, config, args.resume)
+    log.info("unseen worlds %d-%d generated in %s in %.1f s", seeds[0], seeds[-1], out / "worlds",
+             time.perf_counter() - started)
+    return meta
+
+
 def run(args: argparse.Namespace) -> int:
     model = _model_path(args)
     if not model.is_file():
         raise CommandError(f"model file not found: {model}", "pass --model PATH to an .onnx file")
-    experiments = tuple(args.experiments)
+    experiments = tuple(e.key for e in EXPERIMENTS if e.key in args.experiments or "all" in args.experiments)
     if args.server and "speed_limit" in experiments:
         log.warning("--server: skipping the speed-limit experiment (the speed limit belongs to the server)")
         experiments = tuple(e for e in experiments if e != "speed_limit")
@@ -76,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         SteeringModel(model)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
+    worlds_meta = _worlds(args, out) if "unseen_worlds" in experiments else None
     spec = DriverSpec(model=None if args.server else str(model), server=args.server)
     model_sha = file_sha256(model)
     journal = out / "runs.jsonl"
@@ -83,11 +116,14 @@ def run(args: argparse.Namespace) -> int:
                                             "driver": driver_identity(spec)}, args.resume)
     cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
-                      map_dir=str(out / "failures"), vehicle=args.vehicle)
+                      map_dir=str(out / "failures"), vehicle=args.vehicle,
+                      worlds=tuple(worlds_meta["files"].items()) if worlds_meta else ())
     meta = {"model": str(model), "model_sha256": model_sha, "code_version": code_version(),
             "behavior": args.behavior, "seeds": args.seeds, "base_seed": args.seed, "laps": args.laps,
             "workers": args.workers, "driver": spec_dict(spec), "autonomy_rule": AUTONOMY_RULE,
             "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}
+    if worlds_meta:
+        meta["worlds"] = worlds_meta
 
     bar = RunProgress(max_runs(cfg))
     runner = make_runner(args.backend, spec, args.workers, journal, on_result=bar.record, reuse=reuse,

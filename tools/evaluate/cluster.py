@@ -18,25 +18,18 @@ from typing import Any
 
 from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, Runner, Task, run_task
+from tools.ray_support import INSTALL_HINT, import_ray, init_ray
 
 log = logging.getLogger(__name__)
+__all__ = ["BACKENDS", "INSTALL_HINT", "RETRIES", "RayRunner", "RunLostError", "import_ray", "make_runner"]
 
 BACKENDS = ("local", "ray")
 #: attempts after the first before a run counts as lost (a killed worker, a lost node, a crash)
 RETRIES = 3
-INSTALL_HINT = 'install the cluster extra: pip install "robust-behavioral-cloning[cluster]"'
 
 
 class RunLostError(Exception):
     """A run failed on every attempt; the finished runs are in the journal (``--resume`` continues)."""
-
-
-def import_ray() -> Any:
-    try:
-        import ray
-    except ImportError as exc:
-        raise CommandError("--backend ray needs Ray, which is not installed", INSTALL_HINT) from exc
-    return ray
 
 
 class RayRunner(Runner):
@@ -61,12 +54,7 @@ class RayRunner(Runner):
 
     def _start(self, workers: int) -> Any:
         ray = import_ray()
-        if not ray.is_initialized():
-            self._owns_ray = True
-            if self.address:
-                ray.init(address=self.address)
-            else:
-                ray.init(num_cpus=max(1, workers), include_dashboard=False, _node_ip_address="127.0.0.1")
+        self._owns_ray = init_ray(ray, workers, self.address)
         self._remote = ray.remote(num_cpus=1, max_retries=0)(self._task_fn)
         self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         log.info("Ray backend: %d CPUs (%s)", self.workers, self.address or "local instance")

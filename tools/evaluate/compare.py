@@ -16,12 +16,12 @@ from typing import Any
 from models.runfiles import CONFIG, HISTORY, read_history
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
 from tools.evaluate.paper import PAPER_TABLE10, PAPER_TABLE10_RANGES
-from tools.evaluate.report import format_cell, format_range
+from tools.evaluate.report import format_cell, format_range, shown_experiments
 
 log = logging.getLogger("rbc.compare")
 
 #: Table 10 rows (the paper leaves out the obstacle experiment there).
-TABLE10_EXPERIMENTS = tuple(e for e in EXPERIMENTS if e.key != "obstacles")
+TABLE10_EXPERIMENTS = tuple(e for e in EXPERIMENTS if e.paper and e.key != "obstacles")
 
 
 def paper_table10() -> dict[str, dict[str, str]]:
@@ -111,7 +111,8 @@ def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
         row("Validation MSE", [f"{c['training']['val_mse']:.4f}" if "val_mse" in (c.get("training") or {})
                                else "n/a" for c in columns], "val_mse")
     row("Deployment latency", [_fmt_latency(c["latency"]) for c in columns], "latency")
-    for exp in TABLE10_EXPERIMENTS:
+    beyond = [e for e in shown_experiments(c["summary"] for c in columns) if not e.paper]
+    for exp in (*TABLE10_EXPERIMENTS, *beyond):
         row(exp.title, [format_cell(c["summary"].get(exp.key)) for c in columns], exp.key)
     lines += ["", f"~100 % means: {AUTONOMY_RULE}. Latency: drive_server's own decode-to-command time "
               "and the Unity-wire round trip on this machine (the paper: preprocessing to command on an RTX 2070)."]

@@ -5,6 +5,7 @@ Changing what "~100 %" means, a step size or a cap is an edit of this table, not
 
 from __future__ import annotations
 
+import statistics
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -46,12 +47,15 @@ class Experiment:
       ``eta``   -- degree of autonomy (mean +- std over seeds) for each value in ``values``;
       ``range`` -- step outward from ``origin`` by ``step`` until the first non-autonomous run,
                    within ``[lower_cap, upper_cap]``; reported relative to ``origin``;
-      ``max``   -- like ``range`` but upward only, reported as an absolute value.
+      ``max``   -- like ``range`` but upward only, reported as an absolute value;
+      ``worlds`` -- eta of one run per generated world (mean +- std over worlds, and the worst world).
+
+    ``paper`` False marks an experiment beyond the paper: not run unless asked for, labelled as such.
     """
 
     key: str
     title: str
-    measure: Literal["eta", "range", "max"]
+    measure: Literal["eta", "range", "max", "worlds"]
     parameter: str | None = None  # the ScenarioConfig field that is varied
     values: tuple[Any, ...] = (None,)
     origin: float = 0.0
@@ -63,6 +67,7 @@ class Experiment:
     realtime: bool = False
     fixed: dict[str, Any] = field(default_factory=dict)  # other ScenarioConfig overrides
     axis: str = ""  # what a plot's x axis says, in words with the unit
+    paper: bool = True  # one of the paper's eight (run by default)
 
     def applies_to(self, behavior: str) -> bool:
         return behavior in self.behaviors
@@ -92,7 +97,22 @@ EXPERIMENTS: tuple[Experiment, ...] = (
     Experiment("speed_limit", "Vehicle speed limit variation", "max", "speed_limit_kmh",
                origin=30.0, step=5.0, lower_cap=30.0, upper_cap=100.0, unit="km/h", realtime=True,
                axis="speed limit (km/h)"),
+    # Beyond the paper: generalisation to worlds never trained on, from the reserved evaluation seeds
+    # (tools.sim.worldgen); one run per world at the first seed (the nominal spawn pose), the behavior's cones.
+    Experiment("unseen_worlds", "Unseen generated worlds (beyond the paper)", "worlds", "track",
+               axis="generated evaluation world (seed)", paper=False),
 )
+
+#: What ``rbc eval`` runs by default: the paper's eight (Table 9 as the paper has it).
+PAPER_EXPERIMENTS: tuple[str, ...] = tuple(e.key for e in EXPERIMENTS if e.paper)
+#: Unseen worlds per evaluation by default (``--worlds``).
+DEFAULT_UNSEEN_WORLDS = 10
+
+
+def run_eta(record: dict[str, Any]) -> float:
+    """The eta of one run: the mean over its laps (0 for a run without a lap)."""
+    laps = record["laps"]
+    return statistics.fmean(lap["eta"] for lap in laps) if laps else 0.0
 
 
 def experiment(key: str) -> Experiment:

@@ -12,6 +12,7 @@ PAPER_TABLE9: dict[str, dict[str, str]] = {
     "orientation": {"simplistic": "[-35°, +15°]", "rigorous": "[-25°, +25°]", "collision": "[-55°, +40°]"},
     "heading_inversion": {"simplistic": "≈96.91 %", "rigorous": "≈72.89 %", "collision": "≈91.09 %"},
     "speed_limit": {"simplistic": "40 km/h", "rigorous": "35 km/h", "collision": "50 km/h"},
+    "unseen_worlds": {"simplistic": "–", "rigorous": "–", "collision": "–"},  # beyond the paper
 }
 
 #: The paper's Table 10 ranges (offsets from the default), as numbers: the table and the chart use them.

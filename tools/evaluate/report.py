@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,10 @@ def format_cell(entry: dict[str, Any] | None) -> str:
     """One measured Table 9 cell in the paper's notation."""
     if entry is None:
         return "n/a"
+    if entry["measure"] == "worlds":
+        from tools.evaluate.worlds import format_worlds
+
+        return format_worlds(entry)
     if entry["measure"] == "eta":
         parts = []
         for stats in entry["values"].values():
@@ -57,6 +62,12 @@ def format_cell(entry: dict[str, Any] | None) -> str:
     return f"{'≥ ' if up.get('hit_cap') else ''}{up['limit']:.0f} {unit}"
 
 
+def shown_experiments(summaries: Iterable[dict[str, Any]]) -> list[Experiment]:
+    """The paper's experiments, and those beyond it that one of ``summaries`` ran (tables keep their rows)."""
+    summaries = list(summaries)
+    return [e for e in EXPERIMENTS if e.paper or any(e.key in s for s in summaries)]
+
+
 def table9(summaries: dict[str, dict[str, Any]], with_paper: bool = True) -> str:
     """Markdown in the layout of the paper's Table 9: one column per behavior (plus the paper's)."""
     behaviors = list(summaries)
@@ -66,7 +77,7 @@ def table9(summaries: dict[str, dict[str, Any]], with_paper: bool = True) -> str
         if with_paper:
             head.append(f"{b.capitalize()} (paper)")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for exp in EXPERIMENTS:
+    for exp in shown_experiments(summaries.values()):
         row = [exp.title]
         for b in behaviors:
             entry = summaries[b].get(exp.key)
@@ -76,7 +87,9 @@ def table9(summaries: dict[str, dict[str, Any]], with_paper: bool = True) -> str
         lines.append("| " + " | ".join(row) + " |")
     lines.append("")
     lines.append(f"~100 % means: {AUTONOMY_RULE}. η: mean ± std over seeds. Ranges are offsets from the default "
-                 "(light intensity 1.0, light direction 0°, yaw 0°); ≤/≥ mark a search that reached its cap.")
+                 "(light intensity 1.0, light direction 0°, yaw 0°); ≤/≥ mark a search that reached its cap."
+                 + (" Unseen worlds: one run per generated evaluation world, mean ± std over worlds."
+                    if any("unseen_worlds" in s for s in summaries.values()) else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -112,6 +125,11 @@ def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out
     for exp in EXPERIMENTS:
         entry = summary.get(exp.key)
         if not entry or entry["measure"] == "eta":
+            continue
+        if entry["measure"] == "worlds":
+            from tools.evaluate.worlds import plot_worlds
+
+            written += [p for p in [plot_worlds(entry, out_dir / f"{exp.key}.png", plt)] if p]
             continue
         points = plot_points(exp, entry, records)
         if not points:

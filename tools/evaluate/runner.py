@@ -48,6 +48,9 @@ class Task:
     seed: int
     scenario: dict[str, Any] = field(default_factory=dict)  # ScenarioConfig keyword arguments
     map_dir: str | None = None  # write a trajectory map here if the run is not autonomous
+    # a generated world's track document: written to scenario["track"] by a worker that lacks the file
+    # (a Ray node of another machine), so the run and its record are the driver's
+    track_doc: dict[str, Any] | None = field(default=None, compare=False, repr=False)
 
 
 _DRIVERS: dict[tuple, Any] = {}
@@ -76,6 +79,12 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
     from tools.sim.scenario import ScenarioConfig
     from tools.sim.session import run_scenario
 
+    if task.track_doc is not None and not Path(task.scenario["track"]).is_file():
+        track = Path(task.scenario["track"])
+        track.parent.mkdir(parents=True, exist_ok=True)
+        tmp = track.with_name(f"{track.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(task.track_doc, indent=1) + "\n", encoding="utf-8")
+        tmp.replace(track)
     config = ScenarioConfig(**task.scenario)
     started = time.perf_counter()
     result = run_scenario(config, _driver(spec, config.speed_limit_kmh))

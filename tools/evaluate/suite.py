@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol.facts import DEPLOY_SPEED_KMH
-from tools.evaluate.experiments import EXPERIMENTS, SETUPS, Experiment, is_autonomous
+from tools.evaluate.experiments import EXPERIMENTS, PAPER_EXPERIMENTS, SETUPS, Experiment, is_autonomous, run_eta
 from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
 from tools.sim.vehicle import VEHICLE_KINDS
@@ -30,11 +30,12 @@ class SuiteConfig:
     base_seed: int = 0
     laps: int = 1
     speed_limit_kmh: float = DEPLOY_SPEED_KMH
-    experiments: tuple[str, ...] = tuple(e.key for e in EXPERIMENTS)
+    experiments: tuple[str, ...] = PAPER_EXPERIMENTS  # unseen_worlds only when asked for
     track: str | None = None  # override the behavior's track (e.g. a short test track)
     map_dir: str | None = None
     vehicle: str = VEHICLE_KINDS[0]  # the car model (ScenarioConfig.vehicle)
     overrides: dict[str, Any] = field(default_factory=dict)  # extra ScenarioConfig fields
+    worlds: tuple[tuple[int, str], ...] = ()  # (seed, track file) of the unseen_worlds experiment
 
 
 class SearchStopped(Exception):
@@ -64,13 +65,16 @@ def _task(exp: Experiment, value: Any, cfg: SuiteConfig, seed: int) -> Task:
     return Task(exp.key, cfg.behavior, value, seed, _scenario_for(exp, value, cfg, seed), cfg.map_dir)
 
 
-def _eta(record: dict[str, Any]) -> float:
-    laps = record["laps"]
-    return statistics.fmean(lap["eta"] for lap in laps) if laps else 0.0
+def _world_task(exp: Experiment, seed: int, path: str, cfg: SuiteConfig) -> Task:
+    """One run on a generated world, at the first seed (the nominal spawn pose); the document travels with it."""
+    from tools.evaluate.worlds import track_doc
+
+    scenario = {**base_scenario(cfg), "track": path, "seed": cfg.base_seed, "realtime": False, "spawn_noise": True}
+    return Task(exp.key, cfg.behavior, seed, cfg.base_seed, scenario, cfg.map_dir, track_doc=track_doc(path))
 
 
 def summarize_eta(records: list[dict[str, Any]]) -> dict[str, Any]:
-    etas = [_eta(r) for r in records]
+    etas = [run_eta(r) for r in records]
     return {"mean": statistics.fmean(etas), "std": statistics.pstdev(etas) if len(etas) > 1 else 0.0,
             "n": len(etas), "etas": etas, "autonomous": sum(is_autonomous(r) for r in records)}
 
@@ -78,9 +82,12 @@ def summarize_eta(records: list[dict[str, Any]]) -> dict[str, Any]:
 def max_runs(cfg: SuiteConfig) -> int:
     """The most runs the suite can take (range searches usually stop earlier): a progress bar's total."""
     chosen = [e for e in EXPERIMENTS if e.key in cfg.experiments and e.applies_to(cfg.behavior)]
-    total = 0 if any(e.key == "no_variation" for e in chosen) else cfg.seeds
+    searched = any(e.measure in ("range", "max") for e in chosen)
+    total = 0 if any(e.key == "no_variation" for e in chosen) or not searched else cfg.seeds
     for exp in chosen:
-        if exp.measure == "eta":
+        if exp.measure == "worlds":
+            total += len(cfg.worlds)
+        elif exp.measure == "eta":
             total += len(exp.values) * cfg.seeds
         elif exp.measure == "range":
             total += round((exp.origin - exp.lower_cap) / exp.step) + round((exp.upper_cap - exp.origin) / exp.step)
@@ -97,15 +104,24 @@ def run_suite(cfg: SuiteConfig, runner: Runner, workers: int) -> dict[str, Any]:
 
     # phase 1: eta experiments (no variation first: the ranges start from it)
     eta_exps = [e for e in chosen if e.measure == "eta"]
-    if "no_variation" not in [e.key for e in eta_exps] and any(e.measure != "eta" for e in chosen):
+    if "no_variation" not in [e.key for e in eta_exps] and any(e.measure in ("range", "max") for e in chosen):
         eta_exps.insert(0, next(e for e in EXPERIMENTS if e.key == "no_variation"))
     futures = {(e.key, v, s): runner.submit(_task(e, v, cfg, s)) for e in eta_exps for v in e.values for s in seeds}
+    world_exps = [e for e in chosen if e.measure == "worlds"]
+    worlds = {(e.key, seed): runner.submit(_world_task(e, seed, path, cfg)) for e in world_exps
+              for seed, path in cfg.worlds}
     for exp in eta_exps:
         summary[exp.key] = {"measure": "eta", "title": exp.title, "parameter": exp.parameter, "values": {
             str(v): summarize_eta([futures[(exp.key, v, s)].result() for s in seeds]) for v in exp.values}}
+    if world_exps:
+        from tools.evaluate.worlds import summarize_worlds
+
+        for exp in world_exps:
+            summary[exp.key] = summarize_worlds([worlds[(exp.key, seed)].result() for seed, _ in cfg.worlds])
 
     # phase 2: range searches, all directions concurrently, one step at a time each
-    base_ok = futures[("no_variation", None, cfg.base_seed)].result()["autonomous"]
+    base = futures.get(("no_variation", None, cfg.base_seed))
+    base_ok = base is not None and base.result()["autonomous"]
     searches: list[tuple[Experiment, str, float, float, float]] = []
     for exp in chosen:
         if exp.measure == "range":

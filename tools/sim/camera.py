@@ -29,9 +29,11 @@ def focal_px() -> float:
     return (FRAME_HEIGHT / 2) / math.tan(math.radians(VFOV_DEG) / 2)
 
 
-def fog_weight(dist: np.ndarray | float) -> np.ndarray | float:
-    """Share of the haze colour at ``dist`` metres."""
-    return 1.0 - np.exp(-np.maximum(np.asarray(dist) - FOG_START, 0.0) / FOG_RANGE)
+def fog_weight(dist: np.ndarray | float, density: float = 1.0) -> np.ndarray | float:
+    """Share of the haze colour at ``dist`` metres (``density``: the track's haze factor)."""
+    if density == 1.0:
+        return 1.0 - np.exp(-np.maximum(np.asarray(dist) - FOG_START, 0.0) / FOG_RANGE)
+    return 1.0 - np.exp(-np.maximum(np.asarray(dist) - FOG_START, 0.0) * density / FOG_RANGE)
 
 
 class CameraModel:
@@ -58,10 +60,8 @@ class CameraModel:
                        MAX_GROUND_DIST / np.linalg.norm(g_rays[..., :2], axis=-1))
         ground = np.array([forward, lateral]) + t[..., None] * g_rays[..., :2]
         self.ground_xy = np.ascontiguousarray(ground, dtype=np.float32)
-        fog = fog_weight(t * np.linalg.norm(g_rays, axis=-1)).astype(np.float32)
-        self.fog_rows = int(np.count_nonzero(fog.max(1) > 0.004))  # fog only touches rows near the horizon
-        self.fog = np.ascontiguousarray(fog[: self.fog_rows])
-        self.clear = np.ascontiguousarray(1.0 - fog[: self.fog_rows])
+        self.ground_dist = t * np.linalg.norm(g_rays, axis=-1)
+        self.fog_rows, self.fog, self.clear = self.fog_tables(1.0)
 
         # ground footprint of a pixel at the centre column, per row (picks the mip level)
         mid = FRAME_WIDTH // 2
@@ -74,6 +74,12 @@ class CameraModel:
         self.sky_azimuth = np.degrees(np.arctan2(s_rays[..., 1], s_rays[..., 0])).astype(np.float32)
         self.sky_elevation = np.degrees(
             np.arctan2(s_rays[..., 2], np.linalg.norm(s_rays[..., :2], axis=-1))).astype(np.float32)
+
+    def fog_tables(self, density: float) -> tuple[int, np.ndarray, np.ndarray]:
+        """Rows touched by fog below the horizon and their fog and clear weights (float32)."""
+        fog = fog_weight(self.ground_dist, density).astype(np.float32)
+        rows = int(np.count_nonzero(fog.max(1) > 0.004))  # fog only touches rows near the horizon
+        return rows, np.ascontiguousarray(fog[:rows]), np.ascontiguousarray(1.0 - fog[:rows])
 
     def mip_bands(self, texel_m: float) -> list[tuple[int, int, int]]:
         """(level, first row, end row) bands of ground rows, rows relative to the horizon row."""

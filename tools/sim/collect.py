@@ -35,7 +35,7 @@ from tools.sim.track_file import get_track
 
 log = logging.getLogger(__name__)
 
-_EPOCH = dt.datetime(2020, 1, 1, 12, 0, 0)  # first timestamp of a new log (fixed: runs are reproducible)
+EPOCH = dt.datetime(2020, 1, 1, 12, 0, 0)  # first timestamp of a new log (fixed: runs are reproducible)
 
 
 class OutputDirError(ValueError):
@@ -102,16 +102,22 @@ def prepare_output(out_dir: Path, overwrite: bool = False, append: bool = False)
                                  f"or --append to add to them")
     (out_dir / IMAGE_DIR).mkdir(exist_ok=True)
     last = last_row_stamp(out_dir / LOG_NAME) if append else None
-    return _EPOCH if last is None else last + dt.timedelta(seconds=10)
+    return EPOCH if last is None else last + dt.timedelta(seconds=10)
 
 
 def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, append: bool = False,
-            progress: Callable[[float, float], None] | None = None) -> CollectResult:
-    """Drive ``config.laps`` laps (per direction) with the autopilot and record them to ``out_dir``."""
+            progress: Callable[[float, float], None] | None = None, start: dt.datetime | None = None
+            ) -> CollectResult:
+    """Drive ``config.laps`` laps (per direction) with the autopilot and record them to ``out_dir``.
+
+    ``start`` is the time of the first row (frame names); by default the fixed epoch, or after the
+    last row when appending. Several worlds of one data set each get their own (unique image names).
+    """
     out_dir = Path(out_dir).resolve()
     track = get_track(config.track)  # a bad track or cone count is an error before any output exists
     place_cones(track, config.cones, config.cone_seed)
-    start = prepare_output(out_dir, overwrite, append)
+    first = prepare_output(out_dir, overwrite, append)
+    start = first if start is None else start
     result = CollectResult(out_dir=out_dir, rows=0, zero_steer_rows=0)
     directions = (False, True) if config.both_directions else (False,)
     wall0 = time.perf_counter()
@@ -146,7 +152,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                         paths = [img_dir / frame_name(cam, when) for cam in cameras]
                         pending = paths
                         for cam, path in zip(cameras, paths, strict=True):
-                            path.write_bytes(encode_jpeg(sim.render(cam, jitter)))
+                            path.write_bytes(encode_jpeg(sim.render(cam, jitter), sim.jpeg_quality))
                         st = sim.vehicle.state
                         speed = from_kmh(st.speed * 3.6, config.speed_unit)
                         pending = []  # from here on an interrupt may orphan images, never a row

@@ -21,6 +21,7 @@ from tools.sim.camera import (
     jitter_homography,
     jitter_rotation,
 )
+from tools.sim.postfx import PostFx
 from tools.sim.sky import EL_BOTTOM, EL_TOP, PANO_H, PANO_W, SKY_DIRECT_SHARE
 from tools.sim.sprites import PropPainter
 from tools.sim.world import Pose, World
@@ -41,15 +42,23 @@ class _CameraState:
         self.sky_x = np.ascontiguousarray(model.sky_azimuth * np.float32(PANO_W / 360.0))
         rows = (EL_TOP - model.sky_elevation) / (EL_TOP - EL_BOTTOM) * (PANO_H - 1)
         self.sky_y = np.ascontiguousarray(rows, dtype=np.float32)
+        self.fog_rows, self.fog, self.clear = model.fog_rows, model.fog, model.clear
+        if world.track.appearance.haze != 1.0:
+            self.fog_rows, self.fog, self.clear = model.fog_tables(world.track.appearance.haze)
         haze = np.array(world.haze + (round(255 * SKY_DIRECT_SHARE),), np.uint8)
-        self.haze_block = np.ascontiguousarray(np.broadcast_to(haze, (model.fog_rows, FRAME_WIDTH, 4)))
+        self.haze_block = np.ascontiguousarray(np.broadcast_to(haze, (self.fog_rows, FRAME_WIDTH, 4)))
 
 
 class Renderer:
-    """Renders frames of one world. Not thread-safe (it reuses a scratch frame); make one per thread."""
+    """Renders frames of one world. Not thread-safe (it reuses a scratch frame); make one per thread.
 
-    def __init__(self, world: World) -> None:
+    ``seed`` seeds the per-frame appearance jitter of version-2 tracks (frames are deterministic for a
+    seed and the order of the calls).
+    """
+
+    def __init__(self, world: World, seed: int = 0) -> None:
         self.world = world
+        self.postfx = PostFx(world.track.appearance, seed)
         self.props = PropPainter(world)
         self.cameras = {name: _CameraState(model, world) for name, model in camera_models().items()}
         self._fb = np.empty((FRAME_HEIGHT, FRAME_WIDTH, 4), np.uint8)
@@ -92,9 +101,9 @@ class Renderer:
             maps = cv2.transform(pts, mat)
             cv2.remap(g.mips[lvl], maps, None, cv2.INTER_LINEAR, dst=fb[a:b], borderMode=cv2.BORDER_CONSTANT,
                       borderValue=g.border)
-        if m.fog_rows:
-            rows = fb[hr:hr + m.fog_rows]
-            rows[:] = cv2.blendLinear(rows, cam.haze_block, m.clear, m.fog)
+        if cam.fog_rows:
+            rows = fb[hr:hr + cam.fog_rows]
+            rows[:] = cv2.blendLinear(rows, cam.haze_block, cam.clear, cam.fog)
 
         axes = m.axes @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # camera axes, world coordinates
         if pitch_deg or roll_deg:  # a rotated camera sees the same image through a homography
@@ -111,7 +120,7 @@ class Renderer:
         # props, lit for the intensity and seen by the (jittered) camera, straight onto the RGB frame
         pos = np.array([pose.x + c * m.forward - s * m.lateral, pose.y + s * m.forward + c * m.lateral, m.height])
         self.props.draw(out, m, pos, axes, light_intensity)
-        return out
+        return self.postfx.apply(out) if self.postfx.active else out
 
     def render_all(self, pose: Pose, light_intensity: float = 1.0, pitch_deg: float = 0.0,
                    roll_deg: float = 0.0) -> dict[str, np.ndarray]:

@@ -14,12 +14,16 @@ import cv2
 import numpy as np
 
 from tools.sim.cones import CONE_HEIGHT, CONE_RADIUS
-from tools.sim.texture import DECK_EXTRA, SHIFT, GroundAlbedo, surface_runs
-from tools.sim.track import Track
+from tools.sim.road_paint import DECK_EXTRA, SHIFT, curve_runs, surface_runs
+from tools.sim.texture import GroundAlbedo
+from tools.sim.themes import TREES
+from tools.sim.track import SURFACE_KINDS, Track
 
-BROADLEAF, CONIFER = 0, 1
+BROADLEAF, CONIFER, BOULDER = 0, 1, 2  # boulders (version-2 themes) are drawn like broadleaf crowns
 RAIL_HEIGHT = 1.0  # metres, top rail of the bridge
 RAIL_POST_SPACING = 2.0
+BARRIER_HEIGHT = 0.75  # metres, guard rails outside sharp curves (edges.barriers)
+BARRIER_RADIUS = 60.0  # curves tighter than this get a guard rail on the outside
 TREE_MIN_GAP = 1.8  # metres between trunks
 # shadow opacity (0..255) per part: foliage lets some light through, solid parts do not
 OPACITY_SOLID, OPACITY_BROADLEAF, OPACITY_CONIFER = 255, 225, 235
@@ -36,6 +40,7 @@ class Props:
     poles: np.ndarray  # (n, 3): x, y, height
     cones: np.ndarray  # (n, 2): x, y
     rails: tuple[np.ndarray, ...]  # polylines (m, 2) of bridge rails, RAIL_HEIGHT high, posts every 2 m
+    barriers: tuple[np.ndarray, ...] = ()  # polylines (m, 2) of guard rails, BARRIER_HEIGHT high
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,7 @@ def place_props(track: Track, ground: GroundAlbedo, cones: np.ndarray | None = N
     poles = _poles(track, ground)
     trees = _trees(track, ground, poles)
     cone_xy = np.zeros((0, 2)) if cones is None else np.asarray(cones, dtype=np.float64).reshape(-1, 2)
-    return Props(trees=trees, poles=poles, cones=cone_xy, rails=rails)
+    return Props(trees=trees, poles=poles, cones=cone_xy, rails=rails, barriers=_barriers(track))
 
 
 def _distance_to_line(track: Track, xy: np.ndarray) -> np.ndarray:
@@ -103,13 +108,20 @@ def _trees(track: Track, ground: GroundAlbedo, poles: np.ndarray) -> np.ndarray:
             keep.append(i)
     xy = xy[keep]
     n = len(xy)
-    conifer_share = 0.8 if track.scenery.theme == "forest" else 0.15
-    kind = (rng.uniform(0, 1, n) < conifer_share).astype(np.float64)
+    theme = TREES[track.scenery.theme]
+    kind = (rng.uniform(0, 1, n) < theme.conifer_share).astype(np.float64)
     h = rng.uniform(spec.min_height, spec.max_height, n)
     crown_r = np.where(kind == CONIFER, rng.uniform(0.18, 0.24, n) * h, rng.uniform(0.26, 0.34, n) * h)
     crown_z = np.where(kind == CONIFER, rng.uniform(0.12, 0.25, n) * h, h - 1.8 * crown_r)
     trunk_r = 0.12 + 0.018 * h
     tint = rng.uniform(-1, 1, n)
+    if theme.boulder_share:  # a sphere resting on the ground, no trunk to speak of
+        rock = (kind == BROADLEAF) & (rng.uniform(0, 1, n) < theme.boulder_share)
+        h = np.where(rock, h * 0.3, h)
+        kind[rock] = BOULDER
+        crown_r = np.where(rock, 0.5 * h, crown_r)
+        crown_z = np.where(rock, 0.1 * h, crown_z)
+        trunk_r = np.where(rock, 0.01, trunk_r)
     return np.column_stack([xy, h, crown_r, crown_z, trunk_r, kind, tint])
 
 
@@ -137,6 +149,22 @@ def _bridge_rails(track: Track) -> tuple[np.ndarray, ...]:
         for sgn in (-1.0, 1.0):
             rails.append(track.centerline[idx] + track.normals[idx] * sgn * d)
     return tuple(rails)
+
+
+def _barriers(track: Track) -> tuple[np.ndarray, ...]:
+    """Guard rails on the outside of curves tighter than BARRIER_RADIUS, off bridges (they have rails)."""
+    if not track.edges.barriers:
+        return ()
+    paved = track.surface_kinds() != SURFACE_KINDS.index("bridge")
+    d = track.road_width / 2 + track.shoulder_width + 0.4
+    out = []
+    for sgn in (1.0, -1.0):  # the outside of a left turn is the right side
+        sharp = (sgn * track.curvature > 1.0 / BARRIER_RADIUS) & paved
+        for a, b in curve_runs(sharp, track.spacing, pad=8.0):
+            s = np.arange(a, b + 1e-6, RAIL_POST_SPACING)
+            idx = np.round(s / track.spacing).astype(np.int64) % len(track.s)
+            out.append(track.centerline[idx] - track.normals[idx] * sgn * d)
+    return tuple(out)
 
 
 # ---------------------------------------------------------------------------------------------- shadows
@@ -187,10 +215,11 @@ def draw_shadows(props: Props, sun: Sun, shape: tuple[int, int], x0: float, y1: 
         tri = np.stack([c + perp * CONE_RADIUS, c - perp * CONE_RADIUS, c + off * CONE_HEIGHT], 1)
         for q in px(tri):
             cv2.fillConvexPoly(mask, q, OPACITY_SOLID, cv2.LINE_AA, SHIFT)
-    for rail in props.rails:
+    rails = [(rail, RAIL_HEIGHT) for rail in props.rails] + [(b, BARRIER_HEIGHT) for b in props.barriers]
+    for rail, top in rails:
         width = max(1, int(round(0.08 / res)))
-        for z in (RAIL_HEIGHT, RAIL_HEIGHT / 2):
+        for z in (top, top / 2):
             cv2.polylines(mask, [px(rail + off * z)], False, OPACITY_SOLID, width, cv2.LINE_AA, SHIFT)
-        posts = [px(np.stack([p, p + off * RAIL_HEIGHT])) for p in rail]
+        posts = [px(np.stack([p, p + off * top])) for p in rail]
         cv2.polylines(mask, posts, False, OPACITY_SOLID, width, cv2.LINE_AA, SHIFT)
     return mask

@@ -69,7 +69,7 @@ def run_scenario(config: ScenarioConfig, driver: Any, progress: Callable[[float,
     def send() -> None:
         nonlocal frames
         rgb = sim.render("center", sim.camera_jitter()) if render else None
-        payload = sim.telemetry(encode_image(rgb) if rgb is not None else "")
+        payload = sim.telemetry(encode_image(rgb, sim.jpeg_quality) if rgb is not None else "")
         driver.send(Frame(payload=payload, t=sim.t, truth=sim.vehicle.state))
         frames += 1
         if on_frame is not None and rgb is not None:

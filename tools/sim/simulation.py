@@ -79,7 +79,12 @@ class Simulation:
             from tools.sim.world import get_world  # cached: the textures are built once per process
 
             self.renderer = Renderer(get_world(track, config.light_direction_deg,
-                                               self.cones if len(self.cones) else None))
+                                               self.cones if len(self.cones) else None), seed=config.seed)
+
+    @property
+    def jpeg_quality(self) -> int:
+        """JPEG quality of this track's camera frames (its ``appearance``; 75 as the Unity simulator)."""
+        return self.track.appearance.jpeg_quality
 
     # --- geometry -----------------------------------------------------------------------------------
     def _line_pose(self, s: float) -> tuple[float, float, float]:

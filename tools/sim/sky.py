@@ -10,13 +10,15 @@ import math
 
 import numpy as np
 
+from tools.sim.looks import SkySpec
 from tools.sim.scenery import Sun
 from tools.sim.texture import fbm
+from tools.sim.themes import SKIES
 
 PANO_W = 2048  # columns over 360 degrees of azimuth (counter-clockwise from east)
 EL_TOP, EL_BOTTOM = 36.0, -4.0  # degrees covered by the rows
 PANO_H = 200
-HAZE: dict[str, tuple[int, int, int]] = {"meadow": (200, 214, 224), "forest": (176, 190, 200)}
+HAZE: dict[str, tuple[int, int, int]] = {theme: sky.haze for theme, sky in SKIES.items()}
 SKY_DIRECT_SHARE = 0.3  # share of the sky's brightness that follows the light intensity
 
 
@@ -24,13 +26,19 @@ def elevation_to_row(el_deg: np.ndarray | float) -> np.ndarray | float:
     return (EL_TOP - np.asarray(el_deg)) / (EL_TOP - EL_BOTTOM) * (PANO_H - 1)
 
 
-def make_panorama(theme: str, sun: Sun, seed: int = 3) -> np.ndarray:
+def haze_colour(theme: str, sky: SkySpec) -> tuple[int, int, int]:
+    """Horizon and fog colour: the track's own or its theme's."""
+    return sky.haze if sky.haze is not None else SKIES[theme].haze
+
+
+def make_panorama(theme: str, sun: Sun, sky: SkySpec | None = None) -> np.ndarray:
     """RGBA panorama (PANO_H, PANO_W, 4); alpha holds the sky's direct-light share for light intensity."""
-    rng = np.random.default_rng(seed)
+    sky = sky or SkySpec()
+    rng = np.random.default_rng(sky.seed)
     el = np.linspace(EL_TOP, EL_BOTTOM, PANO_H, dtype=np.float32)[:, None]
     az = np.linspace(0, 360, PANO_W, endpoint=False, dtype=np.float32)[None, :]
-    haze = np.array(HAZE[theme], np.float32)
-    zenith = np.array((72, 128, 204) if theme == "meadow" else (84, 132, 190), np.float32)
+    haze = np.array(haze_colour(theme, sky), np.float32)
+    zenith = np.array(sky.zenith if sky.zenith is not None else SKIES[theme].zenith, np.float32)
     t = np.clip(el / EL_TOP, 0, 1) ** 0.55
     img = (1 - t)[..., None] * haze + t[..., None] * zenith
     img = np.broadcast_to(img, (PANO_H, PANO_W, 3)).copy()
@@ -46,12 +54,12 @@ def make_panorama(theme: str, sun: Sun, seed: int = 3) -> np.ndarray:
     # clouds: thresholded noise, flattened towards the horizon, brighter on top
     n = fbm((PANO_H, PANO_W), rng, cells=(8, 24, 64, 160), amps=(1.0, 0.5, 0.3, 0.15))
     n = np.concatenate([n[:, : PANO_W // 2], n[:, : PANO_W // 2][:, ::-1]], 1)  # periodic in azimuth
-    cover = np.clip((n - 0.15) * 2.5, 0, 1) * np.clip((el - 3) / 8, 0, 1) ** 0.5
+    cover = np.clip((n - sky.cloud_threshold) * 2.5, 0, 1) * np.clip((el - 3) / 8, 0, 1) ** 0.5
     shade = 1 - 0.18 * np.clip((n - 0.3) * 2, 0, 1)
     img = (1 - cover[..., None]) * img + cover[..., None] * (np.array((246, 248, 250), np.float32) * shade[..., None])
 
     # distant terrain: layered silhouettes (heights in degrees), aerial perspective towards the haze
-    layers = _terrain_layers(theme, rng)
+    layers = [(_ridge(rng, r.base, r.amp, r.harmonics, r.jag), r.color, r.fade) for r in SKIES[theme].ridges]
     for height, color, fade in layers:
         mask = el[:, 0][:, None] <= height[None, :]
         c = np.array(color, np.float32) * (1 - fade) + haze * fade
@@ -78,15 +86,3 @@ def _ridge(rng: np.random.Generator, base: float, amp: float, harmonics: tuple[i
         prof += jag * np.abs(np.sin(x * PANO_W / 7)) * rng.uniform(0.5, 1.0, PANO_W)
     return prof.astype(np.float32)
 
-
-def _terrain_layers(theme: str, rng: np.random.Generator):
-    if theme == "forest":
-        return [
-            (_ridge(rng, 3.0, 9.0, (2, 3, 5, 9, 17, 31)), (128, 146, 168), 0.35),  # far range
-            (_ridge(rng, 1.5, 5.0, (3, 4, 7, 13, 27)), (82, 104, 92), 0.3),  # nearer wooded range
-            (_ridge(rng, 0.4, 1.2, (5, 11, 23), jag=0.8), (38, 62, 38), 0.25),  # forest edge
-        ]
-    return [
-        (_ridge(rng, 0.6, 2.5, (2, 3, 5, 11)), (104, 136, 110), 0.45),  # low hills
-        (_ridge(rng, 0.2, 0.8, (7, 13, 29), jag=0.6), (52, 84, 50), 0.3),  # tree line
-    ]

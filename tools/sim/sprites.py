@@ -16,11 +16,22 @@ import numpy as np
 from protocol.facts import FRAME_WIDTH
 from tools.sim.camera import CameraModel, fog_weight
 from tools.sim.cones import CONE_HEIGHT, CONE_RADIUS
-from tools.sim.scenery import CONIFER, RAIL_HEIGHT, TCROWN_R, TCROWN_Z, TH, TKIND, TTINT, TTRUNK_R
+from tools.sim.scenery import (
+    BARRIER_HEIGHT,
+    CONIFER,
+    RAIL_HEIGHT,
+    TCROWN_R,
+    TCROWN_Z,
+    TH,
+    TKIND,
+    TTINT,
+    TTRUNK_R,
+)
 from tools.sim.sky import SKY_DIRECT_SHARE
+from tools.sim.themes import BOULDER_COLOURS, TREES
 from tools.sim.world import World
 
-VIEW_DISTANCE = {"meadow": 110.0, "forest": 85.0}  # metres; further props are left to the haze and panorama
+VIEW_DISTANCE = {theme: t.view_distance for theme, t in TREES.items()}  # metres; further: haze and panorama
 LOD_DIST = 35.0  # beyond this, trees are drawn with fewer shapes
 NEAR = 0.8  # metres; props closer to the camera plane than this are skipped
 CELL = 16.0  # metres, side of the visibility grid cells
@@ -29,10 +40,11 @@ LAMBERT_LIT, LAMBERT_MID, LAMBERT_DARK = 0.75, 0.45, 0.12  # direct light on a p
 
 # albedos (RGB)
 TRUNK = (92, 68, 48)
-LEAF = {0: (60, 102, 42), CONIFER: (36, 72, 40)}
 POLE = (150, 152, 156)
 CONE_ORANGE, CONE_WHITE, CONE_FOOT = (240, 96, 22), (238, 238, 238), (44, 44, 44)
 RAIL = (112, 88, 64)
+BARRIER = (170, 172, 176)  # galvanised steel
+RAIL_CULL_MARGIN = 10.0  # metres: a rail whose every point is this far beyond the view distance is skipped
 
 # prop kinds and their drawing recipes: (shape, first vertex, end vertex, colour slot)
 BROADLEAF_K, CONIFER_K, POLE_K, CONE_K = 0, 1, 2, 3
@@ -60,12 +72,11 @@ class PropPainter:
         self.haze = np.array(world.haze + (round(255 * SKY_DIRECT_SHARE),), np.float64)
         self.sun_vector = world.sun.vector
         self.view_dist = VIEW_DISTANCE[world.track.scenery.theme]
+        self.fog_density = world.track.appearance.haze
         self._tabulate(world)
-        self.rails = world.props.rails
-        if self.rails:
-            pts = np.concatenate(self.rails)
-            self._rail_centre = pts.mean(0)
-            self._rail_radius = float(np.linalg.norm(pts - self._rail_centre, axis=1).max())
+        # (polyline, height, colour, bounding centre, radius): bridge rails, then guard rails
+        self.rails = [(r, RAIL_HEIGHT, RAIL) + _bounds(r) for r in world.props.rails]
+        self.rails += [(r, BARRIER_HEIGHT, BARRIER) + _bounds(r) for r in world.props.barriers]
         self._cells: dict[tuple[int, int], np.ndarray] = {}
 
     # -- tables ---------------------------------------------------------------------------------------
@@ -92,7 +103,7 @@ class PropPainter:
                                  -cr, z0, z0, -0.62 * cr, -waist,
                                  -cr, cr, z0])
             z = np.column_stack([z0, z0, zt, zt, h - cr, cz, cz, z1, z1, h, cz, cz, h, z1, z1, cz, cz, h])
-            leaf = np.array([LEAF[int(k)] for k in t[:, TKIND]], np.float64) * (1 + 0.12 * t[:, TTINT])[:, None]
+            leaf = _leaf_colours(t, TREES[world.track.scenery.theme].leaves)
             cols = np.stack([self._lit(np.broadcast_to(TRUNK, (n, 3)), vis["trees"], LAMBERT_MID),
                              self._lit(leaf, vis["trees"], LAMBERT_DARK), self._lit(leaf, vis["trees"], LAMBERT_LIT),
                              self._lit(leaf, vis["trees"], LAMBERT_MID)], 1)
@@ -170,7 +181,7 @@ class PropPainter:
         go straight onto the final 3-channel image.
         """
         haze = self.haze[:3] * (1 + (intensity - 1) * self.haze[3] / 255)
-        if self.rails and math.hypot(*(pos[:2] - self._rail_centre)) < self._rail_radius + self.view_dist:
+        if self.rails:
             self._draw_rails(img, cam, pos, axes, intensity, haze)
         idx = self._candidates(pos[0], pos[1])
         if len(idx) == 0:
@@ -197,7 +208,7 @@ class PropPainter:
         px = np.empty(pts.shape[:-1] + (2,), np.int32)
         px[..., 0] = np.round(cam.cx * (1 << SHIFT) + scale * pts[..., 0] / zc)
         px[..., 1] = np.round(cam.cy * (1 << SHIFT) + scale * pts[..., 1] / zc)
-        fog = fog_weight(np.sqrt((base * base).sum(1)))[:, None, None]
+        fog = fog_weight(np.sqrt((base * base).sum(1)), self.fog_density)[:, None, None]
         rgba = self.colours[sel]
         rgb = rgba[..., :3] if intensity == 1.0 else rgba[..., :3] * (1 + (intensity - 1) / 255 * rgba[..., 3:])
         cols = (rgb * (1 - fog) + haze * fog).tolist()
@@ -225,9 +236,12 @@ class PropPainter:
 
     def _draw_rails(self, fb: np.ndarray, cam: CameraModel, pos: np.ndarray, axes: np.ndarray, intensity: float,
                     haze: np.ndarray) -> None:
-        """Bridge rails: a top and a middle rail and posts, clipped at the camera plane."""
+        """Bridge and guard rails: a top and a middle rail and posts, clipped at the camera plane."""
         up = axes[:, 2]
-        for rail in self.rails:
+        reach = self.view_dist + RAIL_CULL_MARGIN
+        for rail, top, albedo, centre, radius in self.rails:
+            if math.hypot(pos[0] - centre[0], pos[1] - centre[1]) > radius + reach:
+                continue
             cam_xyz = (rail - pos[:2]) @ axes[:, :2].T - pos[2] * up
             front = cam_xyz[:, 2] > NEAR
             if front.sum() < 2:
@@ -235,18 +249,40 @@ class PropPainter:
             dist = float(np.median(np.hypot(cam_xyz[front, 0], cam_xyz[front, 2])))
             if dist > self.view_dist:
                 continue
-            fog = float(fog_weight(dist))
-            lit = self._lit(np.array([RAIL], np.float64), np.ones(1), 0.6)[0]
+            fog = float(fog_weight(dist, self.fog_density))
+            lit = self._lit(np.array([albedo], np.float64), np.ones(1), 0.6)[0]
             rgb = lit[:3] * (1 + (intensity - 1) / 255 * lit[3])
             color = (rgb * (1 - fog) + haze * fog).tolist()
-            for zh, width in ((RAIL_HEIGHT, 2), (0.5 * RAIL_HEIGHT, 1)):
+            for zh, width in ((top, 2), (0.5 * top, 1)):
                 pts = cam_xyz + zh * up
                 for run in _runs(front):
                     px = np.round(cam.project(pts[run]) * (1 << SHIFT)).astype(np.int32)
                     cv2.polylines(fb, [px], False, color, width, cv2.LINE_AA, SHIFT)
-            tops = np.round(cam.project(cam_xyz[front] + RAIL_HEIGHT * up) * (1 << SHIFT)).astype(np.int32)
+            tops = np.round(cam.project(cam_xyz[front] + top * up) * (1 << SHIFT)).astype(np.int32)
             feet = np.round(cam.project(cam_xyz[front]) * (1 << SHIFT)).astype(np.int32)
             cv2.polylines(fb, list(np.stack([feet, tops], 1)), False, color, 1, cv2.LINE_AA, SHIFT)
+
+
+def _bounds(rail: np.ndarray) -> tuple[np.ndarray, float]:
+    centre = rail.mean(0)
+    return centre, float(np.linalg.norm(rail - centre, axis=1).max())
+
+
+def _leaf_colours(t: np.ndarray, leaves: dict[int, tuple]) -> np.ndarray:
+    """Crown albedo per tree: its kind's colour brightened or darkened by its tint (version 1), or a
+    blend of the kind's two colours by the tint; boulders are grey blends."""
+    kinds = t[:, TKIND].astype(np.int64)
+    tint = t[:, TTINT]
+    out = np.empty((len(t), 3))
+    for k in np.unique(kinds).tolist():
+        m = kinds == k
+        cols = BOULDER_COLOURS if k == 2 else leaves[k]
+        if len(cols) == 1:
+            out[m] = np.array([cols[0]], np.float64) * (1 + 0.12 * tint[m])[:, None]
+        else:
+            u = ((tint[m] + 1) / 2)[:, None]
+            out[m] = (1 - u) * np.array(cols[0], np.float64) + u * np.array(cols[1], np.float64)
+    return out
 
 
 def _runs(mask: np.ndarray) -> list[slice]:

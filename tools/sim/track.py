@@ -13,10 +13,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tools.sim.looks import Appearance, Edges, SkySpec
+from tools.sim.themes import THEMES as THEMES  # re-exported: the track file names themes
+from tools.sim.themes import V1_THEMES as V1_THEMES
+
 log = logging.getLogger(__name__)
 
-SURFACE_KINDS = ("asphalt", "bridge", "dirt")
-THEMES = ("meadow", "forest")
+#: Road surface kinds; the order is fixed (indices are stored per sample), new kinds are appended.
+SURFACE_KINDS = ("asphalt", "bridge", "dirt", "concrete", "gravel", "worn_asphalt")
+V1_SURFACE_KINDS = SURFACE_KINDS[:3]  # what a version-1 track file may use
 MIN_TURN_RADIUS = 6.0  # metres: a 2.7 m wheelbase at 25 degrees turns on ~5.8 m
 
 
@@ -110,6 +115,10 @@ class Track:
     source: str
     description: str = ""
     digest: str = ""  # hash of the parsed definition: equal digests draw identical worlds
+    version: int = 1
+    edges: Edges = field(default_factory=Edges)
+    sky: SkySpec = field(default_factory=SkySpec)
+    appearance: Appearance = field(default_factory=Appearance)
 
     def __post_init__(self) -> None:
         for arr in (self.centerline, self.tangents, self.normals, self.curvature, self.s):

@@ -17,11 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from tools.sim.geometry import closest_overlap
 from tools.sim.spline import resample_loop
 from tools.sim.track import (
     MIN_TURN_RADIUS,
     SURFACE_KINDS,
     THEMES,
+    V1_SURFACE_KINDS,
+    V1_THEMES,
     CameraJitter,
     PoleSpec,
     Scenery,
@@ -32,6 +35,7 @@ from tools.sim.track import (
     WaterSpec,
 )
 from tools.sim.track_reader import Reader
+from tools.sim.track_v2 import V2_KEYS, parse_appearance, parse_edges, parse_sky
 
 log = logging.getLogger(__name__)
 
@@ -40,11 +44,12 @@ MAX_CONTROL_POINTS = 2000
 MAX_COORDINATE_M = 10_000.0
 MAX_LENGTH_M = 20_000.0
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # what this simulator writes; it reads every version in SUPPORTED_VERSIONS
+SUPPORTED_VERSIONS = (1, 2)
 
 
 _TOP_KEYS = {"name", "version", "description", "centerline", "road_width", "lanes", "shoulder_width",
-             "surfaces", "scenery", "sun", "start", "camera_jitter"}
+             "surfaces", "scenery", "sun", "start", "camera_jitter"} | V2_KEYS
 
 
 _REQUIRED = ("name", "version", "centerline", "road_width")
@@ -79,12 +84,13 @@ def _load_text(text: str, source: str) -> Track:
 def parse_track(data: Any, source: str = "<dict>") -> Track:
     """Validate a decoded track definition and build the :class:`Track`.
 
-    Keys: ``name``, ``version`` (1), ``centerline`` ([[x, y], ...] metres, at least 4 points, closed,
+    Keys: ``name``, ``version`` (1 or 2), ``centerline`` ([[x, y], ...] metres, at least 4 points, closed,
     driving direction = point order), ``road_width`` (edge line to edge line) are required;
     ``description``, ``lanes`` (1, or 2 with a dashed centre line), ``shoulder_width``, ``surfaces``
     ([{from_s, to_s, kind}]), ``scenery`` ({theme, trees, poles, water, kerbs}), ``sun``
     ({azimuth_deg, elevation_deg}), ``start`` ({s}) and ``camera_jitter`` ({pitch_deg, roll_deg}) are
-    optional. Every problem raises :class:`TrackError` naming ``source``.
+    optional. Version 2 adds ``edges``, ``sky`` and ``appearance`` and more surface kinds and themes
+    (:mod:`tools.sim.track_v2`). Every problem raises :class:`TrackError` naming ``source``.
     """
     r = Reader(source)
     if not isinstance(data, dict):
@@ -95,8 +101,12 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         r.fail(f"unknown key(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(sorted(_TOP_KEYS))})")
-    if data["version"] != FORMAT_VERSION:
-        r.fail(f"unsupported version {data['version']!r} (this simulator reads version {FORMAT_VERSION})")
+    version = data["version"]
+    if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
+        r.fail(f"unsupported version {version!r} (this simulator reads versions "
+               f"{', '.join(map(str, SUPPORTED_VERSIONS))})")
+    if version == 1 and V2_KEYS & set(data):
+        r.fail(f"key(s) {', '.join(sorted(V2_KEYS & set(data)))} need \"version\": 2")
     name = data["name"]
     if not isinstance(name, str) or not name:
         r.fail("'name' must be a non-empty string")
@@ -117,8 +127,9 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
                f"y={pts[k, 1]:.1f}) is below the {need:.1f} m this road width and shoulder need")
     _check_overlap(pts, s, length, road_width + 2 * shoulder, r)
 
-    surfaces = tuple(_surface(item, i, length, r) for i, item in enumerate(r.list(data, "surfaces")))
-    scenery = _scenery(r.obj(data, "scenery"), r)
+    kinds = V1_SURFACE_KINDS if version == 1 else SURFACE_KINDS
+    surfaces = tuple(_surface(item, i, length, r, kinds) for i, item in enumerate(r.list(data, "surfaces")))
+    scenery = _scenery(r.obj(data, "scenery"), r, V1_THEMES if version == 1 else THEMES)
     sun = r.obj(data, "sun")
     r.keys(sun, "sun", {"azimuth_deg", "elevation_deg"})
     start = r.obj(data, "start")
@@ -136,7 +147,9 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
         camera_jitter=CameraJitter(r.number(jit, "pitch_deg", 0.0, lo=0.0, hi=10.0, where="camera_jitter"),
                                    r.number(jit, "roll_deg", 0.0, lo=0.0, hi=10.0, where="camera_jitter")),
         centerline=pts, tangents=tan, normals=normals, curvature=curv, s=s, length=float(length),
-        source=source, description=str(data.get("description", "")), digest=digest,
+        source=source, description=str(data.get("description", "")), digest=digest, version=int(version),
+        edges=parse_edges(r.obj(data, "edges"), r), sky=parse_sky(r.obj(data, "sky"), r),
+        appearance=parse_appearance(r.obj(data, "appearance"), r),
     )
 
 
@@ -169,34 +182,26 @@ def _control_points(raw: Any, r: Reader) -> np.ndarray:
 
 
 def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: float, r: Reader) -> None:
-    """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself.
-
-    Points further apart along the line than pi/2 * clearance must be at least ``clearance`` apart in
-    space; with curve radii >= clearance / 2 (checked before) closer pairs are always far enough apart.
-    """
-    step = max(1, int(1.0 / (length / len(pts))))  # check on a ~1 m grid
+    """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself
+    (the rule: :func:`tools.sim.geometry.closest_overlap`, checked on a ~1 m grid)."""
+    step = max(1, int(round(1.0 / (length / len(pts)))))
     p, ss = pts[::step], s[::step]
-    gap = math.pi / 2 * clearance
-    for lo in range(0, len(p), 512):
-        d = np.linalg.norm(p[lo:lo + 512, None] - p[None], axis=2)
-        along = np.abs(ss[lo:lo + 512, None] - ss[None])
-        along = np.minimum(along, length - along)
-        bad = (along > gap) & (d < clearance - 1e-6)
-        if bad.any():
-            i, j = np.unravel_index(int(np.argmin(np.where(bad, d, np.inf))), d.shape)
-            i += lo
-            what = "crosses itself" if d[i - lo, j] < 0.5 else "overlaps itself"
-            r.fail(f"road {what} near s={ss[i]:.0f} m and s={ss[j]:.0f} m (x={p[i, 0]:.1f}, y={p[i, 1]:.1f}): "
-                   f"centre lines {d[i - lo, j]:.1f} m apart, road plus shoulders need {clearance:.1f} m")
+    hit = closest_overlap(p, ss, length, clearance)
+    if hit is not None:
+        i, j, d = hit
+        what = "crosses itself" if d < 0.5 else "overlaps itself"
+        r.fail(f"road {what} near s={ss[i]:.0f} m and s={ss[j]:.0f} m (x={p[i, 0]:.1f}, y={p[i, 1]:.1f}): "
+               f"centre lines {d:.1f} m apart, road plus shoulders need {clearance:.1f} m")
 
 
-def _surface(item: Any, i: int, length: float, r: Reader) -> Surface:
+def _surface(item: Any, i: int, length: float, r: Reader, kinds: tuple[str, ...]) -> Surface:
     if not isinstance(item, dict):
         r.fail(f"surfaces[{i}] must be an object with from_s, to_s, kind")
     r.keys(item, f"surfaces[{i}]", {"from_s", "to_s", "kind"})
     kind = item.get("kind", "asphalt")
-    if kind not in SURFACE_KINDS:
-        r.fail(f"surfaces[{i}]: unknown surface kind {kind!r} (known: {', '.join(SURFACE_KINDS)})")
+    if kind not in kinds:
+        more = " (needs version 2)" if kind in SURFACE_KINDS else ""
+        r.fail(f"surfaces[{i}]: unknown surface kind {kind!r}{more} (known: {', '.join(kinds)})")
     a = r.number(item, "from_s", lo=0.0, where=f"surfaces[{i}]")
     b = r.number(item, "to_s", lo=0.0, where=f"surfaces[{i}]")
     if a > length + 1e-6 or b > length + 1e-6:
@@ -206,11 +211,12 @@ def _surface(item: Any, i: int, length: float, r: Reader) -> Surface:
     return Surface(a, b, kind)
 
 
-def _scenery(raw: dict, r: Reader) -> Scenery:
+def _scenery(raw: dict, r: Reader, themes: tuple[str, ...]) -> Scenery:
     r.keys(raw, "scenery", {"theme", "trees", "poles", "water", "kerbs"})
     theme = raw.get("theme", "meadow")
-    if theme not in THEMES:
-        r.fail(f"scenery.theme: unknown theme {theme!r} (known: {', '.join(THEMES)})")
+    if theme not in themes:
+        more = " (needs version 2)" if theme in THEMES else ""
+        r.fail(f"scenery.theme: unknown theme {theme!r}{more} (known: {', '.join(themes)})")
     t = r.obj(raw, "trees")
     r.keys(t, "scenery.trees", {"count", "seed", "min_offset", "max_offset", "min_height", "max_height"})
     w = "scenery.trees"

@@ -79,9 +79,11 @@ class VehicleParams:
     rolling_resistance: float = 0.012  # coefficient (force / weight), radial tyres on asphalt
     # Peak tyre-road friction per surface kind (tools.sim.track.SURFACE_KINDS; a kind missing here
     # gets asphalt's): Wong, Theory of Ground Vehicles, 4th ed., ch. 1, average coefficients of road
-    # adhesion (dry asphalt 0.8-0.9, dry earth road 0.68, gravel 0.6); the wooden bridge is taken as
-    # a wet-asphalt-like 0.7.
-    surface_friction: tuple[tuple[str, float], ...] = (("asphalt", 0.9), ("bridge", 0.7), ("dirt", 0.6))
+    # adhesion (dry asphalt 0.8-0.9, dry concrete 0.8-0.9, dry earth road 0.68, gravel 0.6); the
+    # wooden bridge is taken as a wet-asphalt-like 0.7, loose gravel 0.55, worn (polished) asphalt 0.8.
+    surface_friction: tuple[tuple[str, float], ...] = (("asphalt", 0.9), ("bridge", 0.7), ("dirt", 0.6),
+                                                       ("concrete", 0.85), ("gravel", 0.55),
+                                                       ("worn_asphalt", 0.8))
     # Axle friction = surface friction x these. With equal factors both axles reach their limit at once
     # (the brush model's peak is mu Fz on each) and any deceleration tips the car into a spin; production
     # cars are set up to push their front tyres first (tyre load sensitivity, front roll stiffness), which

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from tools.sim.scenery import TKIND, TX, TY, Props, Sun, draw_shadows, place_props
-from tools.sim.sky import HAZE, make_panorama
+from tools.sim.sky import haze_colour, make_panorama
 from tools.sim.texture import GroundAlbedo, paint_ground
 from tools.sim.track import Track
 
@@ -93,11 +93,11 @@ class World:
         albedo = _albedo(track)
         base = _base_props(track)
         self.props: Props = replace(base, cones=_cone_array(cones))
-        self.haze = HAZE[track.scenery.theme]
+        self.haze = haze_colour(track.scenery.theme, track.sky)
         shadow = _shadow_map(albedo, self.props, self.sun)
         self.ground = light_ground(albedo, shadow, self.ambient, self.direct)
         self.sun_visibility = _prop_visibility(self.props, shadow, albedo, self.sun)
-        self.panorama = make_panorama(track.scenery.theme, self.sun)
+        self.panorama = make_panorama(track.scenery.theme, self.sun, track.sky)
         self.build_seconds = time.perf_counter() - t0
         log.debug("world %s light %+.1f deg, %d cones: built in %.2f s", track.name, self.light_direction_deg,
                   len(self.props.cones), self.build_seconds)

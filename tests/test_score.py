@@ -1,0 +1,50 @@
+"""``rbc score``: open-loop figures of a model on a recorded log, computed through drive_server's pipeline."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from drive_server.model import SteeringModel
+from drive_server.models_dir import bundled_model_path, bundled_models
+from drive_server.pipeline import DrivePipeline
+from protocol.datalog import read_log
+from protocol.jpeg import read_jpeg_file
+from tests.conftest import UDACITY_SAMPLE
+from tools.evaluate.offline import score_models
+
+
+def test_scores_are_the_pipelines_predictions_against_the_log():
+    model = bundled_model_path("simplistic")
+    (score,) = score_models([model], UDACITY_SAMPLE)
+    samples, _ = read_log(UDACITY_SAMPLE)
+    pipeline = DrivePipeline(SteeringModel(model))
+    pred = np.array([pipeline.steer(read_jpeg_file(s.center, reduce=pipeline.reduce)) for s in samples])
+    truth = np.array([s.steering for s in samples])
+    assert score.frames == len(samples) > 0
+    assert score.mse == pytest.approx(np.mean((pred - truth) ** 2))
+    assert score.zero_mse == pytest.approx(np.mean(truth ** 2))
+    assert score.pearson_r == pytest.approx(np.corrcoef(pred, truth)[0, 1])
+    assert score.beats_zero == (score.mse < score.zero_mse)
+
+
+def test_rbc_score_prints_every_bundled_model_and_writes_json(tmp_path):
+    out = tmp_path / "scores.json"
+    proc = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE),
+                           "--json", str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    names = [p.name for p in bundled_models()]
+    assert all(name in proc.stdout for name in names)
+    doc = json.loads(out.read_text())
+    assert [s["model"].rsplit("/", 1)[-1] for s in doc["scores"]] == names and doc["code_version"]
+
+
+def test_rbc_score_on_a_missing_log_is_one_line(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(tmp_path / "nope")],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1

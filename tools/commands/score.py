@@ -1,0 +1,49 @@
+"""``rbc score``: open-loop scores of models on a recorded driving log (e.g. real Unity frames).
+
+Each model predicts the steering of every frame of the log through drive_server's pipeline; prints MSE,
+Pearson r and the MSE of always predicting 0 per model (the sim-to-real figure of the README).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from protocol.facts import CAMERAS
+from tools.console import Progress
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", type=Path, required=True, help="driving-log folder (driving_log.csv and IMG/)")
+    p.add_argument("--model", type=Path, action="append", default=None,
+                   help="ONNX model to score (repeat; default: every bundled model)")
+    p.add_argument("--camera", choices=CAMERAS, default=CAMERAS[0], help="which camera's frames to score")
+    p.add_argument("--json", type=Path, default=None, help="also write the scores to this JSON file")
+
+
+def run(args: argparse.Namespace) -> int:
+    from drive_server.models_dir import bundled_models
+    from drive_server.runrecords import code_version, write_json
+    from protocol.datalog import read_log
+    from tools.evaluate.offline import camera_frames, score_models
+
+    models = args.model or bundled_models()
+    total = len(camera_frames(read_log(args.data)[0], args.camera)) * len(models)
+    progress, done = Progress("score", unit="frame"), [0]
+
+    def tick() -> None:
+        done[0] += 1
+        progress(done[0], total)
+
+    try:
+        scores = score_models(models, args.data, args.camera, on_frame=tick)
+    finally:
+        progress.close()
+    print(f"{'model':<24} {'frames':>6} {'MSE':>8} {'r':>6} {'always-0':>9}  beats always-0")
+    for s in scores:
+        print(f"{Path(s.model).name:<24} {s.frames:>6} {s.mse:>8.4f} {s.pearson_r:>6.2f} {s.zero_mse:>9.4f}  "
+              f"{'yes' if s.beats_zero else 'no'}")
+    if args.json:
+        write_json(args.json, {"data": str(args.data), "camera": args.camera, "code_version": code_version(),
+                               "scores": [s.as_dict() for s in scores]})
+    return 0

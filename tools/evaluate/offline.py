@@ -1,0 +1,72 @@
+"""Open-loop scores of models on a recorded driving log: how well each predicts the recorded steering.
+
+This is the sim-to-real figure of the generalisation study: the bundled models learnt in the headless
+simulator, so their predictions on real Unity frames show how far that transfers. Every frame goes
+through drive_server's own pipeline (the same JPEG decode and preprocessing contract), so a score is
+what the server would have steered; the baseline to beat is always predicting 0.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drive_server.model import SteeringModel
+from drive_server.pipeline import DrivePipeline
+from models.metrics import steering_metrics
+from protocol.datalog import Sample, read_log
+from protocol.jpeg import read_jpeg_file
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class OfflineScore:
+    """One model's predictions against one log's recorded steering (normalised -1..1)."""
+
+    model: str
+    frames: int
+    mse: float
+    pearson_r: float
+    zero_mse: float
+
+    @property
+    def beats_zero(self) -> bool:
+        return self.mse < self.zero_mse
+
+    def as_dict(self) -> dict:
+        return {**asdict(self), "beats_zero": self.beats_zero}
+
+
+def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, float]]:
+    """(frame file, recorded steering) of ``camera`` for every row that has that camera's frame."""
+    frames = [(getattr(s, camera), s.steering) for s in samples]
+    return [(path, steering) for path, steering in frames if path is not None]
+
+
+def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
+                on_frame: Callable[[], None] | None = None) -> OfflineScore:
+    pipeline = DrivePipeline(SteeringModel(model_path))
+    pred = np.empty(len(frames))
+    for i, (path, _) in enumerate(frames):
+        pred[i] = pipeline.steer(read_jpeg_file(path, reduce=pipeline.reduce))
+        if on_frame:
+            on_frame()
+    m = steering_metrics(pred, np.array([steering for _, steering in frames]))
+    return OfflineScore(model=str(model_path), frames=m["n"], mse=m["mse"], pearson_r=m["r"], zero_mse=m["zero_mse"])
+
+
+def score_models(models: Sequence[Path], data: Path, camera: str = "center",
+                 on_frame: Callable[[], None] | None = None) -> list[OfflineScore]:
+    """Each model's :class:`OfflineScore` on the log in ``data`` (rows without the camera's frame skipped)."""
+    samples, report = read_log(data)
+    if report.skipped:
+        log.warning("%s", report.summary())
+    frames = camera_frames(samples, camera)
+    if not frames:
+        raise ValueError(f"{data}: no row has a {camera} frame")
+    return [score_model(Path(m), frames, on_frame) for m in models]
