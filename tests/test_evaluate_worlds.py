@@ -98,3 +98,15 @@ def test_the_world_document_travels_with_the_task(tmp_path):
                                                                      scenario, track_doc=doc))
     assert json.loads(elsewhere.read_text()) == doc and rec["config"]["track"] == str(elsewhere)
     assert rec["value"] == 1_000_001 and rec["laps"]
+
+
+@pytest.mark.parametrize("flags", [["--worlds", "3"], ["--world-seed", "1000005"], ["--world-config", "{}"]])
+def test_world_flags_without_the_experiment_are_a_one_line_error_before_any_output(tmp_path, flags):
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "tools.cli", "eval", "--experiments", "no_variation", *flags,
+                           "--out", str(out)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "unseen_worlds" in proc.stderr and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()

@@ -99,6 +99,10 @@ def run(args: argparse.Namespace) -> int:
     if not model.is_file():
         raise CommandError(f"model file not found: {model}", "pass --model PATH to an .onnx file")
     experiments = tuple(e.key for e in EXPERIMENTS if e.key in args.experiments or "all" in args.experiments)
+    if "unseen_worlds" not in experiments and (args.world_seed is not None or args.world_config
+                                               or args.worlds != DEFAULT_UNSEEN_WORLDS):
+        raise CommandError("--worlds, --world-seed and --world-config belong to the unseen_worlds experiment",
+                           "add --experiments unseen_worlds (or all)")
     if args.server and "speed_limit" in experiments:
         log.warning("--server: skipping the speed-limit experiment (the speed limit belongs to the server)")
         experiments = tuple(e for e in experiments if e != "speed_limit")
