@@ -85,7 +85,8 @@ def paint_ground(track: Track, seed: int | None = None) -> GroundAlbedo:
     area = float(np.prod(hi - lo))
     res = max(TEXEL_M, math.sqrt(area / MAX_TEXELS), float((hi - lo).max()) / MAX_SIDE)
     if res > TEXEL_M:
-        log.warning("track %s spans %.0f x %.0f m: ground texture coarsened to %.1f cm per texel",
+        # info, not a warning: expected for large generated worlds (5-7 cm), and nothing the user must fix
+        log.info("track %s spans %.0f x %.0f m: ground texture coarsened to %.1f cm per texel",
                     track.name, *(hi - lo), res * 100)
     w = int(math.ceil((hi[0] - lo[0]) / res / 8)) * 8
     h = int(math.ceil((hi[1] - lo[1]) / res / 8)) * 8
