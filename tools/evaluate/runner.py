@@ -78,13 +78,10 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
     from tools.evaluate.experiments import is_autonomous
     from tools.sim.scenario import ScenarioConfig
     from tools.sim.session import run_scenario
+    from tools.sim.track_file import write_track_file
 
     if task.track_doc is not None and not Path(task.scenario["track"]).is_file():
-        track = Path(task.scenario["track"])
-        track.parent.mkdir(parents=True, exist_ok=True)
-        tmp = track.with_name(f"{track.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(task.track_doc, indent=1) + "\n", encoding="utf-8")
-        tmp.replace(track)
+        write_track_file(task.scenario["track"], task.track_doc)  # a worker on a node without the file
     config = ScenarioConfig(**task.scenario)
     started = time.perf_counter()
     result = run_scenario(config, _driver(spec, config.speed_limit_kmh))

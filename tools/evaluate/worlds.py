@@ -16,6 +16,7 @@ from typing import Any
 
 from drive_server.runrecords import file_sha256
 from tools.evaluate.experiments import experiment, is_autonomous, run_eta
+from tools.sim.track_file import track_text, write_track_file
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, generate_world, world_seed_range
 
 KEY = "unseen_worlds"
@@ -44,14 +45,11 @@ def write_eval_worlds(out: Path, seeds: list[int], config: WorldGenConfig, resum
     paths = {}
     for seed in seeds:
         path = folder / f"world-{seed}.json"
-        text = json.dumps(generate_world(seed, config), indent=1) + "\n"
-        if resume and path.is_file() and path.read_text(encoding="utf-8") != text:
+        doc = generate_world(seed, config)
+        if resume and path.is_file() and path.read_text(encoding="utf-8") != track_text(doc):
             raise ValueError(f"--resume: {path} is not the world this command generates (another --world-config "
                              "or generator version?); use a new --out, or drop --resume")
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-        paths[seed] = str(path)
+        paths[seed] = str(write_track_file(path, doc))
     return {"seeds": seeds, "seed_range": "eval", "generator_version": GENERATOR_VERSION,
             "config": asdict(config), "files": paths,
             "sha256": {str(s): file_sha256(p) for s, p in paths.items()}}

@@ -20,7 +20,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from drive_server.runrecords import file_sha256
+from drive_server.runrecords import file_sha256, write_bytes
 from tools.sim.collect import CollectConfig, collect
 from tools.sim.worldgen import WorldGenConfig, write_world
 
@@ -96,9 +96,7 @@ def unpack(job: WorldJob, files: dict[str, bytes]) -> None:
         else:
             target = Path(job.folder) / Path(name).relative_to(_WORLD_FOLDER)
         target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = target.with_name(target.name + ".part")
-        tmp.write_bytes(data)
-        tmp.replace(target)
+        write_bytes(target, lambda tmp, data=data: tmp.write_bytes(data))
 
 
 def _init_worker() -> None:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from drive_server.runrecords import write_text
 from tools.sim.geometry import closest_overlap
 from tools.sim.spline import resample_loop
 from tools.sim.track import (
@@ -53,6 +54,19 @@ _TOP_KEYS = {"name", "version", "description", "centerline", "road_width", "lane
 
 
 _REQUIRED = ("name", "version", "centerline", "road_width")
+
+
+def track_text(doc: dict[str, Any]) -> str:
+    """A track document as the text of its file: one serialisation, so equal documents give equal files."""
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def write_track_file(path: str | Path, doc: dict[str, Any]) -> Path:
+    """Write a track document (temp file, then rename: a reader never sees half a file), creating its folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, track_text(doc))
+    return path
 
 
 def builtin_tracks() -> list[str]:

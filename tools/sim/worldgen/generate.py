@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from tools.sim.track import Track
-from tools.sim.track_file import FORMAT_VERSION, parse_track
+from tools.sim.track_file import FORMAT_VERSION, parse_track, write_track_file
 from tools.sim.worldgen import dress
 from tools.sim.worldgen.config import GENERATOR_VERSION, WorldGenConfig, seed_range_of
 from tools.sim.worldgen.layout import CONTROL_SPACING_M, DS, make_layout, too_close
@@ -128,12 +128,7 @@ def check_world(doc: dict, config: WorldGenConfig = DEFAULT_CONFIG) -> list[str]
 
 def write_world(seed: int, path: str | Path, config: WorldGenConfig = DEFAULT_CONFIG) -> Path:
     """Write world ``seed`` as a track file (loads with ``load_track``, ``rbc sim --track PATH``)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(generate_world(seed, config), indent=1) + "\n", encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return write_track_file(path, generate_world(seed, config))
 
 
 def write_worlds(seeds: list[int], folder: str | Path, config: WorldGenConfig = DEFAULT_CONFIG) -> list[Path]:
