@@ -6,6 +6,8 @@ from typing import Any
 
 from tools.errors import CommandError
 
+#: Where the runs of ``rbc eval`` and the worlds of ``rbc collect --worlds`` go: this machine, or Ray tasks.
+BACKENDS = ("local", "ray")
 INSTALL_HINT = 'install the cluster extra: pip install "robust-behavioral-cloning[cluster]"'
 
 

@@ -18,12 +18,11 @@ from typing import Any
 
 from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, Runner, Task, run_task
-from tools.ray_support import INSTALL_HINT, import_ray, init_ray
+from tools.ray_support import BACKENDS, INSTALL_HINT, import_ray, init_ray
 
 log = logging.getLogger(__name__)
 __all__ = ["BACKENDS", "INSTALL_HINT", "RETRIES", "RayRunner", "RunLostError", "import_ray", "make_runner"]
 
-BACKENDS = ("local", "ray")
 #: attempts after the first before a run counts as lost (a killed worker, a lost node, a crash)
 RETRIES = 3
 

@@ -21,12 +21,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from drive_server.runrecords import file_sha256, write_bytes
+from tools.ray_support import BACKENDS
 from tools.sim.collect import CollectConfig, collect
 from tools.sim.worldgen import WorldGenConfig, write_world
 
 log = logging.getLogger(__name__)
 
-BACKENDS = ("local", "ray")
 #: Simulated time reserved for one world's drives: world i's frames are named from day i of the epoch.
 WORLD_TIME_SLOT = dt.timedelta(days=1)
 _WORLD_FILE, _WORLD_FOLDER = "world.json", "world"  # names inside a Ray task's temporary folder
