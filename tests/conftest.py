@@ -4,11 +4,18 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 from pathlib import Path
 
 import pytest
 
 DATA = Path(__file__).parent / "data"
+
+# A shell without job control starts background jobs with SIGINT ignored, and an ignored signal stays
+# ignored in every child: the Ctrl-C tests' commands would never see their SIGINT. A handler here is
+# reset to the default in each child at exec, so the children take Ctrl-C as a user's terminal sends it.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 UDACITY_SAMPLE = DATA / "udacity-sample"
 
 
