@@ -105,6 +105,11 @@ def test_evaluation_worlds_are_refused_unless_explicitly_allowed(tmp_path, capsy
     assert code == 2 and len(err.splitlines()) == 1 and "eval range" in err and "--allow-eval-worlds" in err
     assert not out.exists()
     assert main(["collect", "--worlds", "1", "--track", "lake", "--out", str(out)]) == 2
+    capsys.readouterr()
+    assert main(["collect", "--track", "world:1000003", "--out", str(out)]) == 2  # the same world by name
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "eval range" in err and "--allow-eval-worlds" in err
+    assert not out.exists()
     assert main(["collect", "--worlds", "1", "--world-config", '{"nope": 1}', "--out", str(out)]) == 2
     assert "unknown: nope" in capsys.readouterr().err
 

@@ -10,6 +10,7 @@ import pytest
 
 from tools.cli import main
 from tools.sim.geometry import closest_overlap
+from tools.sim.track import TrackError
 from tools.sim.track_file import load_track, parse_track
 from tools.sim.worldgen import (
     SEED_RANGES,
@@ -111,6 +112,20 @@ def test_rbc_world_bad_arguments_give_one_line(argv, message, capsys, tmp_path, 
     assert main(["world", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("rbc world: error: ") and message in err and "\n" not in err and "Traceback" not in err
+
+
+def test_world_seed_names_the_generated_world_wherever_a_track_is_asked_for(tmp_path, capsys):
+    out = tmp_path / "world.json"
+    assert main(["world", "--seed", "2000001", "--out", str(out)]) == 0
+    by_name, by_file = load_track("world:2000001"), load_track(str(out))
+    assert by_name.name == by_file.name == "world-2000001"
+    assert by_name.digest == by_file.digest and by_name.length == by_file.length
+    for bad in ("world:", "world:-1", "world:1e6", "world: 5"):
+        with pytest.raises(TrackError, match="world:SEED"):
+            load_track(bad)
+    assert main(["sim", "--track", "world:x7", "--autopilot"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "world:SEED" in err and "\n" not in err and "Traceback" not in err
 
 
 def test_generated_frames_are_plausible():

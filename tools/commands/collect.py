@@ -21,7 +21,8 @@ log = logging.getLogger("rbc.collect")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = CollectConfig  # the defaults, defined once
-    p.add_argument("--track", default=None, help=f"built-in track name or track JSON path (default {d.track})")
+    p.add_argument("--track", default=None,
+                   help=f"built-in track name, world:SEED (a generated world) or track JSON path (default {d.track})")
     p.add_argument("--laps", type=int, default=d.laps, help="laps per direction (default %(default)s)")
     p.add_argument("--out", type=Path, required=True, help="output folder (driving_log.csv + IMG/)")
     p.add_argument("--both-directions", action="store_true",
@@ -53,7 +54,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(worlds.csv says which world every row is from; the track files go to OUT/worlds/)")
     w.add_argument("--world-seed", type=int, default=0, metavar="S", help="first world seed (default %(default)s)")
     w.add_argument("--allow-eval-worlds", action="store_true",
-                   help="allow seeds outside the training range 0-999999 (held-out worlds: never train on them)")
+                   help="allow seeds outside the training range 0-999999 with --worlds or --track world:SEED "
+                        "(held-out worlds: never train on them)")
     w.add_argument("--world-config", default=None, metavar="JSON",
                    help='generator settings, a JSON object of WorldGenConfig fields or a file holding one, '
                         'e.g. \'{"max_length_m": 800}\' (default: the documented distribution)')
@@ -121,6 +123,22 @@ def _worlds(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _refuse_held_out_world(track: str, allowed: bool) -> None:
+    """``--track world:SEED`` records training data: a seed outside the training range is refused."""
+    from tools.sim.collect_worlds import training_seed_problem
+    from tools.sim.track_file import world_seed_of
+
+    try:
+        seed = world_seed_of(track)
+    except ValueError as exc:  # TrackError
+        raise CommandError(str(exc)) from None
+    problem = training_seed_problem(seed, 1) if seed is not None else None
+    if problem and not allowed:
+        raise CommandError(problem, "choose a world in the training range, or pass --allow-eval-worlds")
+    if problem:
+        log.warning("%s (--allow-eval-worlds given)", problem)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.worlds is not None:
         return _worlds(args)
@@ -130,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = _config(args)
     args.track = config.track
+    _refuse_held_out_world(config.track, args.allow_eval_worlds)
     progress = Progress(f"collect {args.track}")
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)

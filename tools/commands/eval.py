@@ -62,7 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--world-config", default=None, metavar="JSON",
                    help="unseen_worlds: generator settings, a JSON object of WorldGenConfig fields or a file "
                         "holding one (default: the documented distribution)")
-    p.add_argument("--track", help="override the behavior's track (name or JSON file)")
+    p.add_argument("--track", help="override the behavior's track (name, world:SEED or JSON file)")
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
                    help="km/h for every experiment but the speed one (default %(default)s)")
     add_vehicle_argument(p, d.vehicle)

@@ -24,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     who.add_argument("--model", type=Path, metavar="M.onnx", help="run this ONNX model in-process (no socket)")
     who.add_argument("--autopilot", action="store_true", help="let the scripted autopilot drive (reference)")
     d = ScenarioConfig  # the defaults, defined once
-    p.add_argument("--track", default=d.track, help="built-in track name or track JSON path (default %(default)s)")
+    p.add_argument("--track", default=d.track,
+                   help="built-in track name, world:SEED (a generated world) or track JSON path (default %(default)s)")
     p.add_argument("--laps", type=int, default=d.laps, help="laps to drive (default %(default)s)")
     p.add_argument("--light-intensity", type=float, default=d.light_intensity,
                    help="scene light intensity (default %(default)s)")

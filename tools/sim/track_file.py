@@ -75,15 +75,39 @@ def builtin_tracks() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
 
 
+#: ``world:SEED`` names generated world SEED (the world ``rbc world --seed SEED`` writes) wherever a track is asked for.
+WORLD_PREFIX = "world:"
+
+
+def world_seed_of(name: str | Path) -> int | None:
+    """The seed of a ``world:SEED`` track name, None for any other name; a malformed one is a TrackError."""
+    if not isinstance(name, str) or not name.startswith(WORLD_PREFIX):
+        return None
+    text = name[len(WORLD_PREFIX):]
+    if not text.isdigit() or len(text) > 12:
+        raise TrackError(f"{name}: a generated world is named world:SEED with SEED an integer >= 0, e.g. world:1000000")
+    return int(text)
+
+
 def load_track(name_or_path: str | Path) -> Track:
-    """Load a built-in track by name (``lake``, ``mountain``) or any track file by path."""
+    """Load a built-in track by name (``lake``, ``mountain``), a generated world (``world:SEED``) or any track file."""
     text = str(name_or_path)
+    seed = world_seed_of(name_or_path)
+    if seed is not None:
+        from tools.sim.worldgen.generate import generate_world  # it imports this module
+
+        try:
+            doc = generate_world(seed)
+        except (ValueError, RuntimeError) as exc:
+            raise TrackError(f"{text}: {exc}") from None
+        return parse_track(doc, text)
     if isinstance(name_or_path, str) and text in builtin_tracks():
         res = resources.files("tools.sim") / "tracks" / f"{text}.json"
         return _load_text(res.read_text(encoding="utf-8"), f"builtin:{text}")
     path = Path(name_or_path)
     if not path.is_file():
-        raise TrackError(f"{path}: no such track file (built-in tracks: {', '.join(builtin_tracks())})")
+        raise TrackError(f"{path}: no such track file (built-in tracks: {', '.join(builtin_tracks())}; "
+                         f"a generated world: world:SEED)")
     return _load_text(path.read_text(encoding="utf-8"), str(path))
 
 
