@@ -15,7 +15,7 @@ from drive_server.pipeline import DrivePipeline
 from protocol.datalog import read_log
 from protocol.jpeg import read_jpeg_file
 from tests.conftest import UDACITY_SAMPLE
-from tools.evaluate.offline import score_models
+from tools.evaluate.offline import centred_average, score_models
 
 
 def test_scores_are_the_pipelines_predictions_against_the_log():
@@ -48,3 +48,28 @@ def test_rbc_score_on_a_missing_log_is_one_line(tmp_path):
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode != 0 and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_smoothed_scores_are_against_the_centred_average_of_the_log():
+    assert np.allclose(centred_average(np.array([0.0, 0.0, 0.9, 0.0, 0.0]), 3), [0, 0.3, 0.3, 0.3, 0])
+    assert np.allclose(centred_average(np.array([1.0, 0.0, 0.0, 0.0]), 3), [0.5, 1 / 3, 0, 0])  # short ends
+    model = bundled_model_path("simplistic")
+    (plain,) = score_models([model], UDACITY_SAMPLE)
+    (score,) = score_models([model], UDACITY_SAMPLE, smooth_frames=5)
+    samples, _ = read_log(UDACITY_SAMPLE)
+    pipeline = DrivePipeline(SteeringModel(model))
+    pred = np.array([pipeline.steer(read_jpeg_file(s.center, reduce=pipeline.reduce)) for s in samples])
+    intent = centred_average(np.array([s.steering for s in samples]), 5)
+    assert (score.mse, score.pearson_r) == (plain.mse, plain.pearson_r) and plain.pearson_r_smoothed is None
+    assert score.pearson_r_smoothed == pytest.approx(np.corrcoef(pred, intent)[0, 1])
+    assert score.mse_smoothed == pytest.approx(np.mean((pred - intent) ** 2))
+
+
+def test_rbc_score_smooth_labels_adds_a_column_and_checks_its_value(tmp_path):
+    model = str(bundled_model_path("simplistic"))
+    proc = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE), "--model",
+                           model, "--smooth-labels", "9"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and "9-frame average" in proc.stdout, proc.stderr[-2000:]
+    bad = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE),
+                          "--smooth-labels", "-1"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "Traceback" not in bad.stderr

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from protocol.facts import CAMERAS
 from tools.console import Progress
+from tools.errors import CommandError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -18,6 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", type=Path, action="append", default=None,
                    help="ONNX model to score (repeat; default: every bundled model)")
     p.add_argument("--camera", choices=CAMERAS, default=CAMERAS[0], help="which camera's frames to score")
+    p.add_argument("--smooth-labels", type=int, default=0, metavar="N",
+                   help="also score against the recorded steering averaged over N frames (centred): keyboard "
+                        "taps averaged to what the driver meant, e.g. 9 at 10 Hz; 0: off (default %(default)s)")
     p.add_argument("--json", type=Path, default=None, help="also write the scores to this JSON file")
 
 
@@ -27,6 +31,8 @@ def run(args: argparse.Namespace) -> int:
     from protocol.datalog import read_log
     from tools.evaluate.offline import camera_frames, score_models
 
+    if not 0 <= args.smooth_labels <= 1000:
+        raise CommandError("--smooth-labels must be 0..1000 frames")
     models = args.model or bundled_models()
     total = len(camera_frames(read_log(args.data)[0], args.camera)) * len(models)
     progress, done = Progress("score", unit="frame"), [0]
@@ -36,14 +42,18 @@ def run(args: argparse.Namespace) -> int:
         progress(done[0], total)
 
     try:
-        scores = score_models(models, args.data, args.camera, on_frame=tick)
+        scores = score_models(models, args.data, args.camera, on_frame=tick, smooth_frames=args.smooth_labels)
     finally:
         progress.close()
-    print(f"{'model':<24} {'frames':>6} {'MSE':>8} {'r':>6} {'always-0':>9}  beats always-0")
+    smooth = args.smooth_labels > 1
+    extra = f"  {'r, ' + str(args.smooth_labels) + '-frame average':>22}" if smooth else ""
+    print(f"{'model':<24} {'frames':>6} {'MSE':>8} {'r':>6} {'always-0':>9}  beats always-0{extra}")
     for s in scores:
+        extra = f"  {s.pearson_r_smoothed:>22.2f}" if smooth else ""
         print(f"{Path(s.model).name:<24} {s.frames:>6} {s.mse:>8.4f} {s.pearson_r:>6.2f} {s.zero_mse:>9.4f}  "
-              f"{'yes' if s.beats_zero else 'no'}")
+              f"{'yes' if s.beats_zero else 'no':<14}{extra}")
     if args.json:
-        write_json(args.json, {"data": str(args.data), "camera": args.camera, "code_version": code_version(),
+        write_json(args.json, {"data": str(args.data), "camera": args.camera, "smooth_labels": args.smooth_labels,
+                               "code_version": code_version(),
                                "scores": [s.as_dict() for s in scores]})
     return 0

@@ -33,6 +33,10 @@ class OfflineScore:
     mse: float
     pearson_r: float
     zero_mse: float
+    # against the recorded steering averaged over ``smooth_frames`` (what a keyboard driver meant); 0: not asked
+    smooth_frames: int = 0
+    mse_smoothed: float | None = None
+    pearson_r_smoothed: float | None = None
 
     @property
     def beats_zero(self) -> bool:
@@ -48,25 +52,47 @@ def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, fl
     return [(path, steering) for path, steering in frames if path is not None]
 
 
+def centred_average(values: np.ndarray, frames: int) -> np.ndarray:
+    """Centred moving average over ``frames`` samples (fewer at the ends: only the samples that exist).
+
+    Keyboard steering is a train of taps (~70 % exact zeros in the Udacity sample): the same road gets 0
+    in one frame and -0.3 in the next, which no single-frame model can predict. Its average over about a
+    second is what the driver meant (``rbc train --smooth-labels`` fits the same thing).
+    """
+    v = np.asarray(values, np.float64)
+    kernel = np.ones(max(1, frames))
+    return np.convolve(v, kernel, mode="same") / np.convolve(np.ones_like(v), kernel, mode="same")
+
+
 def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
-                on_frame: Callable[[], None] | None = None) -> OfflineScore:
+                on_frame: Callable[[], None] | None = None, smooth_frames: int = 0) -> OfflineScore:
     pipeline = DrivePipeline(SteeringModel(model_path))
     pred = np.empty(len(frames))
     for i, (path, _) in enumerate(frames):
         pred[i] = pipeline.steer(read_jpeg_file(path, reduce=pipeline.reduce))
         if on_frame:
             on_frame()
-    m = steering_metrics(pred, np.array([steering for _, steering in frames]))
-    return OfflineScore(model=str(model_path), frames=m["n"], mse=m["mse"], pearson_r=m["r"], zero_mse=m["zero_mse"])
+    truth = np.array([steering for _, steering in frames])
+    m = steering_metrics(pred, truth)
+    smoothed = {}
+    if smooth_frames > 1:
+        ms = steering_metrics(pred, centred_average(truth, smooth_frames))
+        smoothed = {"smooth_frames": smooth_frames, "mse_smoothed": ms["mse"], "pearson_r_smoothed": ms["r"]}
+    return OfflineScore(model=str(model_path), frames=m["n"], mse=m["mse"], pearson_r=m["r"], zero_mse=m["zero_mse"],
+                        **smoothed)
 
 
 def score_models(models: Sequence[Path], data: Path, camera: str = "center",
-                 on_frame: Callable[[], None] | None = None) -> list[OfflineScore]:
-    """Each model's :class:`OfflineScore` on the log in ``data`` (rows without the camera's frame skipped)."""
+                 on_frame: Callable[[], None] | None = None, smooth_frames: int = 0) -> list[OfflineScore]:
+    """Each model's :class:`OfflineScore` on the log in ``data`` (rows without the camera's frame skipped).
+
+    ``smooth_frames`` > 1 also scores against the recorded steering's centred average over that many
+    frames (:func:`centred_average`), in log order.
+    """
     samples, report = read_log(data)
     if report.skipped:
         log.warning("%s", report.summary())
     frames = camera_frames(samples, camera)
     if not frames:
         raise ValueError(f"{data}: no row has a {camera} frame")
-    return [score_model(Path(m), frames, on_frame) for m in models]
+    return [score_model(Path(m), frames, on_frame, smooth_frames) for m in models]
