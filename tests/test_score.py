@@ -70,6 +70,12 @@ def test_rbc_score_smooth_labels_adds_a_column_and_checks_its_value(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE), "--model",
                            model, "--smooth-labels", "9"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "9-frame average" in proc.stdout, proc.stderr[-2000:]
+    copy = tmp_path / "run" / "simplistic.onnx"  # same file name, other folder: both rows say which is which
+    copy.parent.mkdir()
+    copy.write_bytes(bundled_model_path("simplistic").read_bytes())
+    both = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE), "--model",
+                           model, "--model", str(copy)], capture_output=True, text=True, timeout=120)
+    assert both.returncode == 0 and model in both.stdout and str(copy) in both.stdout
     bad = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE),
                           "--smooth-labels", "-1"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "Traceback" not in bad.stderr

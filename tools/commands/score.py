@@ -48,9 +48,11 @@ def run(args: argparse.Namespace) -> int:
     smooth = args.smooth_labels > 1
     extra = f"  {'r, ' + str(args.smooth_labels) + '-frame average':>22}" if smooth else ""
     print(f"{'model':<24} {'frames':>6} {'MSE':>8} {'r':>6} {'always-0':>9}  beats always-0{extra}")
-    for s in scores:
+    names = [Path(s.model).name for s in scores]
+    for s, name in zip(scores, names, strict=True):
+        name = name if names.count(name) == 1 else s.model  # two runs' model.onnx: tell them apart
         extra = f"  {s.pearson_r_smoothed:>22.2f}" if smooth else ""
-        print(f"{Path(s.model).name:<24} {s.frames:>6} {s.mse:>8.4f} {s.pearson_r:>6.2f} {s.zero_mse:>9.4f}  "
+        print(f"{name:<24} {s.frames:>6} {s.mse:>8.4f} {s.pearson_r:>6.2f} {s.zero_mse:>9.4f}  "
               f"{'yes' if s.beats_zero else 'no':<14}{extra}")
     if args.json:
         write_json(args.json, {"data": str(args.data), "camera": args.camera, "smooth_labels": args.smooth_labels,
