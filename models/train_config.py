@@ -44,6 +44,7 @@ class TrainConfig:
     min_speed_unit: str = "mph"
     speed_unit: str = "mph"  # unit of the log's speed column: mph (Udacity) or kmh (the paper's simulator)
     smooth_labels: int = 0  # train on a centred moving average of the steering over N frames (0: as recorded)
+    row_stride: int = 1  # train and validate on every Nth row of the logs (1: every row)
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -54,6 +55,8 @@ class TrainConfig:
             raise ValueError(f"export must be best or last, not {self.export!r}")
         if self.brightness_mode not in ("add", "scale"):
             raise ValueError(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
+        if not 1 <= self.row_stride <= 1000:
+            raise ValueError(f"row stride must be 1..1000, got {self.row_stride}")
         if self.min_speed < 0:
             raise ValueError(f"min speed must be >= 0, got {self.min_speed}")
         if self.brightness_range is not None and self.brightness_range < 0:
@@ -75,7 +78,8 @@ class TrainConfig:
         return SplitSpec(self.split, self.val_fraction, self.block_frames, self.gap_frames)
 
     def data_options(self) -> DataOptions:
-        return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels)
+        return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels,
+                           self.row_stride)
 
     def pipeline(self) -> Pipeline:
         """The behavior's pipeline with this run's crop and brightness settings applied."""

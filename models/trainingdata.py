@@ -28,6 +28,9 @@ class DataOptions:
     min_speed_unit: SpeedUnit | str = SpeedUnit.MPH
     speed_unit: SpeedUnit | str = SpeedUnit.MPH  # unit of the log's speed column
     smooth_frames: int = 0  # training labels: centred moving average over this many frames (0: as recorded)
+    # every Nth row of the logs (1: all). Neighbouring frames at 15 Hz are near-copies, so a stride keeps the
+    # roads and cuts the frame cache N-fold: PilotNet's 200x66 frames of 380,000 rows would need ~46 GB
+    row_stride: int = 1
 
     def slow(self, speeds: np.ndarray) -> np.ndarray:
         """Rows slower than ``min_speed``, comparing both speeds in km/h."""
@@ -63,7 +66,8 @@ class PreparedData:
         else:
             slow = "no speed filter"
         gap = f", {c['gap']} dropped beside held-out blocks" if c.get("gap") else ""
-        return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images), "
+        stride = f", 1 row in {c['stride']} used" if c.get("stride", 1) > 1 else ""
+        return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images){stride}, "
                 f"{c['unreadable']} with unreadable frames, {slow}; {c['kept']} kept: "
                 f"{c['train']} training + {c['val']} validation ({self.split.kind.value} split{gap})")
 
@@ -71,6 +75,8 @@ class PreparedData:
 def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, options: DataOptions = DataOptions(),
                  workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
     dataset = read_logs(data)
+    if options.row_stride > 1:
+        dataset = DataSet(dataset.samples[::options.row_stride], dataset.reports)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
     speeds = np.array([s.speed for s in dataset.samples], np.float64)
     slow = options.slow(speeds)
@@ -91,7 +97,8 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     sides = np.array([s.has_sides for s in dataset.samples], bool) & pipeline.augment.uses_side_cameras
     if pipeline.augment.uses_side_cameras and not sides.any():
         log.warning("no sample has left and right frames: perspective shifts are skipped")
-    counts = {"rows": sum(r.rows for r in dataset.reports), "skipped": sum(len(r.skipped) for r in dataset.reports),
+    counts = {"rows": sum(r.rows for r in dataset.reports), "stride": options.row_stride,
+              "skipped": sum(len(r.skipped) for r in dataset.reports),
               "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
               "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
               "gap": int(len(usable) - len(train) - len(val))}

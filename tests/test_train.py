@@ -168,3 +168,22 @@ def test_cli_pilotnet_nvidia_approach(tmp_path: Path) -> None:
     assert json.loads(meta[METADATA_MODEL_INFO_KEY])["parameters"] == 252219
     assert list(session.get_inputs()[0].shape[1:]) == [66, 200, 3]
     assert json.loads((out / "config.json").read_text())["resolved"]["deletion_rate"] == 0.0
+
+
+def test_row_stride_trains_as_a_log_of_every_nth_row(tmp_path: Path) -> None:
+    """--row-stride 3 is the run on a log holding every third row (the PilotNet generalist's recipe)."""
+    import shutil
+
+    thinned = tmp_path / "thinned"
+    shutil.copytree(SAMPLE, thinned)
+    lines = (SAMPLE / "driving_log.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    (thinned / "driving_log.csv").write_text("".join(lines[::3]), encoding="utf-8")
+    strided = train(_config(tmp_path / "strided", row_stride=3, export="last"))
+    reference = train(_config(tmp_path / "reference", data=[str(thinned)], export="last"))
+    assert "1 row in 3 used" in strided.info["summary"]
+    assert strided.info["summary"].split(" used, ", 1)[1] == reference.info["summary"].split("images), ", 1)[1]
+    a = exported_weights(strided.run_dir / "checkpoint.pt", "last")
+    b = exported_weights(reference.run_dir / "checkpoint.pt", "last")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with pytest.raises(ValueError, match="row stride"):
+        _config(tmp_path / "bad", row_stride=0)

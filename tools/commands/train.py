@@ -41,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--smooth-labels", type=int, default=TrainConfig.smooth_labels, metavar="N",
                         help="fit a centred moving average of the steering over N frames (keyboard taps averaged "
                              "to what the driver meant); validation still scores the recorded steering. 0: off")
+    parser.add_argument("--row-stride", type=int, default=TrainConfig.row_stride, metavar="N",
+                        help="train and validate on every Nth row of the logs: neighbouring frames are near-copies, "
+                             "so the roads stay and the frame cache shrinks N-fold (PilotNet on large data sets)")
     parser.add_argument("--max-steps-per-epoch", type=int, help="cap steps per epoch (quick runs)")
     parser.add_argument("--threads", type=int,
                         help="PyTorch threads (default: cores - 1 for the shallow CNN, whose batches need a core of "
@@ -63,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
                          batch_size=args.batch_size, seed=args.seed, max_steps_per_epoch=args.max_steps_per_epoch,
                          split=args.split, block_frames=args.block_frames, gap_frames=args.gap_frames,
                          export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
-                         smooth_labels=args.smooth_labels,
+                         smooth_labels=args.smooth_labels, row_stride=args.row_stride,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
     if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)
