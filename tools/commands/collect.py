@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+from dataclasses import replace
 from pathlib import Path
 
 from tools.arguments import add_speed_unit_argument, add_vehicle_argument
@@ -145,10 +146,12 @@ def run(args: argparse.Namespace) -> int:
     if args.resume:
         raise CommandError("--resume continues a --worlds collection", "add --worlds N --world-seed S")
     from tools.sim.collect import collect
+    from tools.sim.worldgen.generate import resolve_track_name
 
     config = _config(args)
     args.track = config.track
     _refuse_held_out_world(config.track, args.allow_eval_worlds)
+    config = replace(config, track=resolve_track_name(config.track))  # world:SEED -> its file
     progress = Progress(f"collect {args.track}")
     try:
         result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)

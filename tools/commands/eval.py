@@ -107,6 +107,10 @@ def run(args: argparse.Namespace) -> int:
         log.warning("--server: skipping the speed-limit experiment (the speed limit belongs to the server)")
         experiments = tuple(e for e in experiments if e != "speed_limit")
     # bad input is an error before any output exists: the track, and the model unless a server drives
+    if args.track:
+        from tools.sim.worldgen.generate import resolve_track_name
+
+        args.track = resolve_track_name(args.track)  # world:SEED -> its file
     get_track(args.track or SETUPS[args.behavior].track)
     if not args.server:
         SteeringModel(model)

@@ -80,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
     from tools.sim.scenario import ScenarioConfig
     from tools.sim.session import run_scenario
     from tools.sim.track_file import get_track
+    from tools.sim.worldgen.generate import resolve_track_name
 
+    args.track = resolve_track_name(args.track)  # world:SEED -> its file
     spawn_s = args.spawn_s
     if args.spawn_frac is not None:
         spawn_s = args.spawn_frac * get_track(args.track).length

@@ -36,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     cv2.setNumThreads(args.threads)
     print(f"rbc sim-bench: 320x160 RGB, OpenCV threads {args.threads}, best of {args.repeats} x {args.frames} frames")
+    from tools.sim.worldgen.generate import resolve_track_name
+
+    args.tracks = [resolve_track_name(t) for t in args.tracks]  # world:SEED -> its file
     tracks = [load_track(t) for t in args.tracks]
     for track in tracks:
         bench_track(track, args)

@@ -75,7 +75,8 @@ def builtin_tracks() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
 
 
-#: ``world:SEED`` names generated world SEED (the world ``rbc world --seed SEED`` writes) wherever a track is asked for.
+#: ``--track world:SEED`` names generated world SEED (the world ``rbc world --seed SEED`` writes) in the rbc
+#: commands, which write it to a file first (:func:`tools.sim.worldgen.generate.resolve_track_name`).
 WORLD_PREFIX = "world:"
 
 
@@ -90,17 +91,12 @@ def world_seed_of(name: str | Path) -> int | None:
 
 
 def load_track(name_or_path: str | Path) -> Track:
-    """Load a built-in track by name (``lake``, ``mountain``), a generated world (``world:SEED``) or any track file."""
+    """Load a built-in track by name (``lake``, ``mountain``) or any track file by path."""
     text = str(name_or_path)
     seed = world_seed_of(name_or_path)
-    if seed is not None:
-        from tools.sim.worldgen.generate import generate_world  # it imports this module
-
-        try:
-            doc = generate_world(seed)
-        except (ValueError, RuntimeError) as exc:
-            raise TrackError(f"{text}: {exc}") from None
-        return parse_track(doc, text)
+    if seed is not None:  # the generator drives its candidates in the simulator, which loads tracks from here
+        raise TrackError(f"{text}: a generated world is loaded from its file: the rbc commands write it for "
+                         f"--track world:SEED (tools.sim.worldgen.resolve_track_name), or write_world({seed}, path)")
     if isinstance(name_or_path, str) and text in builtin_tracks():
         res = resources.files("tools.sim") / "tracks" / f"{text}.json"
         return _load_text(res.read_text(encoding="utf-8"), f"builtin:{text}")

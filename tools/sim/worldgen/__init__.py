@@ -12,7 +12,7 @@ from tools.sim.worldgen.config import (
     seed_range_of,
     world_seed_range,
 )
-from tools.sim.worldgen.generate import check_world, generate_world, write_world, write_worlds
+from tools.sim.worldgen.generate import check_world, generate_world, resolve_track_name, write_world, write_worlds
 
-__all__ = ["GENERATOR_VERSION", "SEED_RANGES", "WorldGenConfig", "check_world", "generate_world", "seed_range_of",
-           "world_seed_range", "write_world", "write_worlds"]
+__all__ = ["GENERATOR_VERSION", "SEED_RANGES", "WorldGenConfig", "check_world", "generate_world",
+           "resolve_track_name", "seed_range_of", "world_seed_range", "write_world", "write_worlds"]

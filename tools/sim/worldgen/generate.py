@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.sim.track import Track
-from tools.sim.track_file import FORMAT_VERSION, parse_track, write_track_file
+from tools.sim.track import Track, TrackError
+from tools.sim.track_file import FORMAT_VERSION, parse_track, world_seed_of, write_track_file
 from tools.sim.worldgen import dress
 from tools.sim.worldgen.config import GENERATOR_VERSION, WorldGenConfig, seed_range_of
 from tools.sim.worldgen.layout import CONTROL_SPACING_M, DS, make_layout, too_close
@@ -129,6 +129,25 @@ def check_world(doc: dict, config: WorldGenConfig = DEFAULT_CONFIG) -> list[str]
 def write_world(seed: int, path: str | Path, config: WorldGenConfig = DEFAULT_CONFIG) -> Path:
     """Write world ``seed`` as a track file (loads with ``load_track``, ``rbc sim --track PATH``)."""
     return write_track_file(path, generate_world(seed, config))
+
+
+def resolve_track_name(track: str) -> str:
+    """A ``--track`` value as the simulator loads it: ``world:SEED`` becomes the path of that world's file.
+
+    The world is written (once per generator version; temp file, then rename) to ``rbc-worlds/`` in the
+    system's temp folder, so every worker process of a command loads the same file. Other names and
+    paths are returned unchanged. A malformed ``world:`` name raises :class:`TrackError`.
+    """
+    seed = world_seed_of(track)
+    if seed is None:
+        return track
+    path = Path(tempfile.gettempdir()) / "rbc-worlds" / f"world-{seed}-g{GENERATOR_VERSION}.json"
+    if not path.is_file():
+        try:
+            write_world(seed, path)
+        except (ValueError, RuntimeError) as exc:
+            raise TrackError(f"{track}: {exc}") from None
+    return str(path)
 
 
 def write_worlds(seeds: list[int], folder: str | Path, config: WorldGenConfig = DEFAULT_CONFIG) -> list[Path]:
