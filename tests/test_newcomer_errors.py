@@ -75,7 +75,8 @@ def test_train_resume_with_a_corrupt_checkpoint(tmp_path, capsys):
 def test_unknown_track_name(command, tmp_path, capsys):
     out = tmp_path / "out"
     argv = [a.format(out=out) for a in command] + ["--track", "nope"]
-    _fails_cleanly(argv, capsys, "no such track file (built-in tracks: lake, mountain)", [out])
+    _fails_cleanly(argv, capsys, "no such track file (built-in tracks: lake, mountain; a generated world: world:SEED)",
+                   [out])
 
 
 @pytest.mark.parametrize(("data", "expect"), [
