@@ -12,6 +12,7 @@ import numpy as np
 
 from models.behavior import Pipeline
 from models.framecache import FrameCache, build_cache
+from models.labels import centred_average
 from models.split import SplitKind, SplitSpec, make_split
 from protocol.datalog import DataLogError, DataSet, read_logs
 from protocol.units import SpeedUnit, to_kmh
@@ -117,13 +118,9 @@ def smooth_labels(dataset: DataSet, steering: np.ndarray, frames: int, use: np.n
     predict; fitting it lowers the error against the taps themselves.
     """
     out = np.empty_like(steering)
-    kernel = np.ones(frames, np.float64)
     logs = np.array([str(s.log) for s in dataset.samples])
     for name in dict.fromkeys(logs):
         idx = np.flatnonzero(logs == name)
-        weight = use[idx].astype(np.float64)
-        total = np.convolve(steering[idx] * weight, kernel, mode="same")
-        count = np.convolve(weight, kernel, mode="same")
-        out[idx] = np.where(count > 0, total / np.maximum(count, 1e-9), steering[idx]).astype(np.float32)
+        out[idx] = centred_average(steering[idx], frames, use[idx]).astype(np.float32)
     out[np.abs(out) < 1e-6] = 0.0  # straight stretches stay exactly zero for the zero-steer balancing
     return out

@@ -12,10 +12,11 @@ import pytest
 from drive_server.model import SteeringModel
 from drive_server.models_dir import bundled_model_path, bundled_models
 from drive_server.pipeline import DrivePipeline
+from models.labels import centred_average
 from protocol.datalog import read_log
 from protocol.jpeg import read_jpeg_file
 from tests.conftest import UDACITY_SAMPLE
-from tools.evaluate.offline import centred_average, score_models
+from tools.evaluate.offline import score_models
 
 
 def test_scores_are_the_pipelines_predictions_against_the_log():
@@ -53,6 +54,7 @@ def test_rbc_score_on_a_missing_log_is_one_line(tmp_path):
 def test_smoothed_scores_are_against_the_centred_average_of_the_log():
     assert np.allclose(centred_average(np.array([0.0, 0.0, 0.9, 0.0, 0.0]), 3), [0, 0.3, 0.3, 0.3, 0])
     assert np.allclose(centred_average(np.array([1.0, 0.0, 0.0, 0.0]), 3), [0.5, 1 / 3, 0, 0])  # short ends
+    assert np.allclose(centred_average(np.array([0.3, 0.0, 0.6]), 9), [0.3, 0.3, 0.3])  # window longer than the log
     model = bundled_model_path("simplistic")
     (plain,) = score_models([model], UDACITY_SAMPLE)
     (score,) = score_models([model], UDACITY_SAMPLE, smooth_frames=5)

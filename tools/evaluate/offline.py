@@ -17,6 +17,7 @@ import numpy as np
 
 from drive_server.model import SteeringModel
 from drive_server.pipeline import DrivePipeline
+from models.labels import centred_average
 from models.metrics import steering_metrics
 from protocol.datalog import Sample, read_log
 from protocol.jpeg import read_jpeg_file
@@ -50,18 +51,6 @@ def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, fl
     """(frame file, recorded steering) of ``camera`` for every row that has that camera's frame."""
     frames = [(getattr(s, camera), s.steering) for s in samples]
     return [(path, steering) for path, steering in frames if path is not None]
-
-
-def centred_average(values: np.ndarray, frames: int) -> np.ndarray:
-    """Centred moving average over ``frames`` samples (fewer at the ends: only the samples that exist).
-
-    Keyboard steering is a train of taps (~70 % exact zeros in the Udacity sample): the same road gets 0
-    in one frame and -0.3 in the next, which no single-frame model can predict. Its average over about a
-    second is what the driver meant (``rbc train --smooth-labels`` fits the same thing).
-    """
-    v = np.asarray(values, np.float64)
-    kernel = np.ones(max(1, frames))
-    return np.convolve(v, kernel, mode="same") / np.convolve(np.ones_like(v), kernel, mode="same")
 
 
 def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
