@@ -8,13 +8,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import pytest
 
 from drive_server.runrecords import file_sha256
 from protocol.datalog import read_log
 from tools.cli import main
 from tools.sim.collect import CollectConfig
-from tools.sim.collect_worlds import WorldsConfig, collect_worlds, world_collect_seed
+from tools.sim.collect_worlds import WorldsConfig, collect_worlds, world_collect_seed, world_light_intensity
 from tools.sim.track_file import load_track
 from tools.sim.worldgen import WorldGenConfig
 
@@ -61,6 +62,39 @@ def test_the_data_set_reads_back_and_worlds_csv_says_where_every_row_is_from(one
     assert covered == list(range(1, len(samples) + 1))
     assert len({w["collect_seed"] for w in worlds}) == 3  # a distinct seed per world, derived from --seed
     assert int(worlds[1]["collect_seed"]) == world_collect_seed(3, 11)
+
+
+def test_without_a_light_range_every_world_is_lit_by_the_collect_config(one_worker):
+    assert {w["light_intensity"] for w in csv.DictReader((one_worker / "worlds.csv").open())} == {"1"}
+
+
+def test_a_light_range_draws_each_worlds_sun_log_uniformly_and_deterministically():
+    draws = [world_light_intensity(0, s, (0.4, 2.5)) for s in range(400)]
+    assert min(draws) >= 0.4 and max(draws) <= 2.5
+    assert draws == [world_light_intensity(0, s, (0.4, 2.5)) for s in range(400)]  # a function of the seeds only
+    assert draws != [world_light_intensity(1, s, (0.4, 2.5)) for s in range(400)]
+    below = sum(d < 1.0 for d in draws) / len(draws)  # 1.0 is the range's geometric centre
+    assert 0.4 < below < 0.6
+    assert world_light_intensity(5, 7, (1.3, 1.3)) == 1.3
+    with pytest.raises(ValueError, match="light-range"):
+        WorldsConfig(count=1, light_range=(2.0, 1.0))
+
+
+def test_a_light_range_collects_each_world_under_its_own_sun_and_records_it(one_worker, tmp_path):
+    out = tmp_path / "lit"
+    collect_worlds(CONFIG, WorldsConfig(first_seed=10, count=3, generator=SHORT, light_range=(0.4, 2.5)), out)
+    worlds = list(csv.DictReader((out / "worlds.csv").open()))
+    lights = [float(w["light_intensity"]) for w in worlds]
+    assert lights == [world_light_intensity(CONFIG.seed, s, (0.4, 2.5)) for s in (10, 11, 12)]
+    assert min(lights) < 1.0 < max(lights)  # these seeds draw a darker and a brighter world
+    plain = {w["world_seed"]: w for w in csv.DictReader((one_worker / "worlds.csv").open())}
+    for w, light in zip(worlds, lights, strict=True):  # the same poses and frame names, only the light differs
+        name = w["first_image"]
+        assert name == plain[w["world_seed"]]["first_image"]
+        lit = cv2.imread(str(out / "IMG" / name)).mean()
+        base = cv2.imread(str(one_worker / "IMG" / name)).mean()
+        assert (lit > base + 3) if light > 1.0 else (lit < base - 3)
+    assert (out / "driving_log.csv").read_text().replace(str(out), "OUT") == _log(one_worker)
 
 
 def test_two_workers_give_the_same_bytes_as_one(one_worker, tmp_path):
@@ -112,6 +146,21 @@ def test_evaluation_worlds_are_refused_unless_explicitly_allowed(tmp_path, capsy
     assert not out.exists()
     assert main(["collect", "--worlds", "1", "--world-config", '{"nope": 1}', "--out", str(out)]) == 2
     assert "unknown: nope" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad", ["2:1", "0:1", "1:inf", "a:b", "1.5"])
+def test_a_malformed_light_range_is_one_usage_line(bad, tmp_path, capsys):
+    out = tmp_path / "x"
+    with pytest.raises(SystemExit) as stop:
+        main(["collect", "--worlds", "1", "--light-range", bad, "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and "--light-range: expected LO:HI" in err[-1] and not out.exists()
+
+
+def test_a_light_range_needs_worlds(tmp_path, capsys):
+    assert main(["collect", "--track", "lake", "--light-range", "0.5:2", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--light-range" in err and "--worlds" in err
 
 
 def _cli(out: Path, *extra: str) -> subprocess.CompletedProcess:

@@ -1,5 +1,9 @@
 """Table 10 writer: training time from a run's history, latency and robustness side by side."""
 
+from pathlib import Path
+
+import pytest
+
 from tools.evaluate.compare import TABLE10_EXPERIMENTS, build_table, training_time_s
 
 
@@ -62,3 +66,28 @@ def test_range_chart_reads_offsets_caps_and_empty_ranges(tmp_path):
                         tmp_path / "t10.png")
     assert chart == tmp_path / "t10.png" and chart.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(tmp_path.glob("*.tmp*"))
+
+
+def test_compare_finds_an_evaluated_model_from_another_folder_and_refuses_a_moved_or_changed_one(tmp_path,
+                                                                                                 monkeypatch):
+    from drive_server.runrecords import file_sha256
+    from tools.commands.compare import evaluated_model
+    from tools.errors import CommandError
+
+    model = tmp_path / "models" / "m.onnx"
+    model.parent.mkdir()
+    model.write_bytes(b"weights")
+    results = {"meta": {"model": "models/m.onnx", "model_resolved": str(model), "model_sha256": file_sha256(model)}}
+    monkeypatch.chdir(tmp_path)
+    assert evaluated_model(results, tmp_path) == Path("models/m.onnx")  # as given, from the eval's folder
+    monkeypatch.chdir(model.parent)
+    assert evaluated_model(results, tmp_path) == model  # from elsewhere: the recorded absolute path
+    model.write_bytes(b"other weights")
+    with pytest.raises(CommandError, match="has changed"):
+        evaluated_model(results, tmp_path)
+    model.unlink()
+    with pytest.raises(CommandError, match="not found"):
+        evaluated_model(results, tmp_path)
+    old = {"meta": {"model": "gone.onnx", "model_sha256": "x"}}  # results.json of an earlier version
+    with pytest.raises(CommandError, match="gone.onnx is not found"):
+        evaluated_model(old, tmp_path)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -60,11 +61,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     w.add_argument("--world-config", default=None, metavar="JSON",
                    help='generator settings, a JSON object of WorldGenConfig fields or a file holding one, '
                         'e.g. \'{"max_length_m": 800}\' (default: the documented distribution)')
+    w.add_argument("--light-range", type=_light_range, default=None, metavar="LO:HI",
+                   help="domain randomisation of the sun: each world's light intensity drawn log-uniformly "
+                        "from LO..HI, e.g. 0.5:2 (recorded in worlds.csv; default: --light-intensity everywhere)")
     w.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worlds collected at once (default: all cores)")
     w.add_argument("--backend", choices=BACKENDS, default="local",
                    help="local: worker processes here; ray: one Ray task per world (pip extra: cluster)")
     w.add_argument("--address", help="with --backend ray: the cluster to join (default: a private Ray instance)")
+
+
+def _light_range(text: str) -> tuple[float, float]:
+    """``LO:HI`` with 0 < LO <= HI (argparse turns the ValueError into a one-line usage error)."""
+    lo, sep, hi = text.partition(":")
+    try:
+        values = (float(lo), float(hi)) if sep else ()
+    except ValueError:
+        values = ()
+    if not values or not 0 < values[0] <= values[1] < math.inf:
+        raise argparse.ArgumentTypeError(f"expected LO:HI with 0 < LO <= HI, e.g. 0.5:2, got {text!r}")
+    return values
 
 
 def _config(args: argparse.Namespace) -> CollectConfig:
@@ -88,7 +104,7 @@ def _worlds(args: argparse.Namespace) -> int:
     if problem:
         log.warning("%s (--allow-eval-worlds given)", problem)
     generator = parse_world_config(args.world_config) if args.world_config else WorldGenConfig()
-    worlds = WorldsConfig(args.world_seed, args.worlds, args.allow_eval_worlds, generator)
+    worlds = WorldsConfig(args.world_seed, args.worlds, args.allow_eval_worlds, generator, args.light_range)
     progress = bar(args.worlds, "worlds", "world")
 
     def on_world(outcome, done: int, total: int) -> None:
@@ -104,11 +120,12 @@ def _worlds(args: argparse.Namespace) -> int:
     finally:
         if progress is not None:
             progress.close()
-    print(f"{'world':>9}  {'rows':>6}  {'interventions':>13}  {'laps':>4}  {'simulated':>9}  track sha256")
+    print(f"{'world':>9}  {'rows':>6}  {'interventions':>13}  {'laps':>4}  {'simulated':>9}  {'light':>5}  "
+          "track sha256")
     for o in result.outcomes:
         causes = f"  ({', '.join(f'{n} {c}' for c, n in o.causes.items())})" if o.causes else ""
         print(f"{o.seed:>9}  {o.rows:>6}  {o.interventions:>13}  {o.laps:>4}  {o.sim_time_s:>8.0f}s  "
-              f"{o.track_sha256[:12]}{causes}")
+              f"{o.light_intensity:>5.2f}  {o.track_sha256[:12]}{causes}")
     failed = [o.seed for o in result.outcomes if o.interventions]
     done = len(result.outcomes)
     resumed = f", {result.resumed} from an earlier run" if result.resumed else ""
@@ -142,6 +159,9 @@ def run(args: argparse.Namespace) -> int:
         return _worlds(args)
     if args.resume:
         raise CommandError("--resume continues a --worlds collection", "add --worlds N --world-seed S")
+    if args.light_range:
+        raise CommandError("--light-range draws a light intensity per generated world",
+                           "add --worlds N, or give one --light-intensity for --track")
     from tools.sim.collect import collect
     from tools.sim.worldgen.generate import resolve_track_name
 

@@ -7,7 +7,7 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import write_text
+from drive_server.runrecords import file_sha256, write_text
 from tools.errors import CommandError
 from tools.evaluate.compare import build_table, measure_latency, training_summary
 
@@ -44,6 +44,21 @@ def _table9(args: argparse.Namespace) -> int:
     return 0
 
 
+def evaluated_model(results: dict, eval_dir: Path) -> Path:
+    """The model file an evaluation drove: the path as given to rbc eval, else its absolute form (so a
+    compare run from another folder finds it); one line when it has moved or changed since."""
+    meta = results["meta"]
+    given = Path(meta["model"])
+    found = next((p for p in (given, Path(meta.get("model_resolved", given))) if p.is_file()), None)
+    if found is None:
+        raise CommandError(f"{eval_dir}: its model {given} is not found (moved, or a path relative to another "
+                           "folder)", "run rbc compare from the folder rbc eval ran in, or evaluate it again")
+    if file_sha256(found) != meta["model_sha256"]:
+        raise CommandError(f"{eval_dir}: {found} has changed since it was evaluated (sha256 differs)",
+                           "evaluate the model again")
+    return found
+
+
 def run(args: argparse.Namespace) -> int:
     missing = [d for d in args.evals if not (d / "results.json").is_file()]
     if missing:
@@ -57,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     columns = []
     for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
         results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
-        model = Path(results["meta"]["model"])
+        model = evaluated_model(results, eval_dir)
         log.info("measuring the deployment latency of %s", model)
         training = training_summary(run_dir)
         columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),

@@ -126,7 +126,8 @@ def run(args: argparse.Namespace) -> int:
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
                       map_dir=str(out / "failures"), vehicle=args.vehicle,
                       worlds=tuple(worlds_meta["files"].items()) if worlds_meta else ())
-    meta = {"model": str(model), "model_sha256": model_sha, "code_version": code_version(),
+    meta = {"model": str(model), "model_resolved": str(model.resolve()), "model_sha256": model_sha,
+            "code_version": code_version(),
             "behavior": args.behavior, "seeds": args.seeds, "base_seed": args.seed, "laps": args.laps,
             "workers": args.workers, "driver": spec_dict(spec), "autonomy_rule": AUTONOMY_RULE,
             "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}

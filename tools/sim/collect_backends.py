@@ -57,6 +57,7 @@ class WorldOutcome:
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
     interrupted: bool = False
+    light_intensity: float = 1.0  # the scene light it was collected under (--light-range)
 
 
 def collect_world(job: WorldJob) -> WorldOutcome:
@@ -76,7 +77,8 @@ def collect_world(job: WorldJob) -> WorldOutcome:
             causes[cause] = causes.get(cause, 0) + n
     return WorldOutcome(job.seed, job.index, result.rows, result.interventions, len(result.laps),
                         job.collect.seed, str(result.out_dir / "IMG"), file_sha256(path), causes,
-                        round(result.sim_time_s, 3), round(time.perf_counter() - started, 3), result.interrupted)
+                        round(result.sim_time_s, 3), round(time.perf_counter() - started, 3), result.interrupted,
+                        job.collect.light_intensity)
 
 
 def collect_world_packed(job: WorldJob) -> tuple[WorldOutcome, dict[str, bytes]]:

@@ -42,7 +42,10 @@ WORLDS_CSV = "worlds.csv"
 MAX_WORLDS = 100_000
 #: worlds.csv: one line per world; rows are 1-based line numbers of driving_log.csv, images centre frames
 WORLDS_COLUMNS = ("world_seed", "seed_range", "first_row", "last_row", "rows", "first_image", "last_image",
-                  "interventions", "collect_seed", "track_file", "track_sha256", "generator_version")
+                  "interventions", "collect_seed", "track_file", "track_sha256", "generator_version",
+                  "light_intensity")
+#: the random stream of a world's light intensity (--light-range), apart from its autopilot's
+LIGHT_STREAM = 1
 
 
 def training_seed_problem(first: int, count: int) -> str | None:
@@ -62,8 +65,15 @@ class WorldsConfig:
     count: int = 1
     allow_eval_worlds: bool = False  # seeds outside the training range only when explicitly asked for
     generator: WorldGenConfig = field(default_factory=WorldGenConfig)
+    #: domain randomisation of the sun: each world's light intensity drawn log-uniformly from this range
+    #: (None: every world at the collect config's light intensity)
+    light_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.light_range is not None:
+            lo, hi = self.light_range
+            if not 0 < lo <= hi:
+                raise ValueError(f"--light-range must be LO:HI with 0 < LO <= HI, got {lo:g}:{hi:g}")
         if not 1 <= self.count <= MAX_WORLDS:
             raise ValueError(f"--worlds must be 1..{MAX_WORLDS}, got {self.count}")
         if self.first_seed < 0:
@@ -80,6 +90,14 @@ class WorldsConfig:
 def world_collect_seed(seed: int, world_seed: int) -> int:
     """The autopilot and camera seed of one world: distinct per world, a function of the two seeds only."""
     return int(np.random.SeedSequence([seed, world_seed]).generate_state(1)[0]) >> 1
+
+
+def world_light_intensity(seed: int, world_seed: int, light_range: tuple[float, float]) -> float:
+    """A world's light intensity under ``--light-range``: log-uniform (as many worlds darker as brighter by
+    the same factor), a function of the collect seed and the world seed only (not of workers or order)."""
+    lo, hi = light_range
+    u = np.random.default_rng([seed, world_seed, LIGHT_STREAM]).uniform()
+    return round(float(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))), 4)
 
 
 @dataclass
@@ -155,7 +173,10 @@ def collect_worlds(config: CollectConfig, worlds: WorldsConfig, out_dir: Path, w
         if done is not None and (out / WORLDS_DIR / f"world-{seed}.json").is_file():
             finished[seed] = done
             continue
-        jobs.append(WorldJob(index, seed, replace(config, seed=world_collect_seed(config.seed, seed)),
+        light = (world_light_intensity(config.seed, seed, worlds.light_range) if worlds.light_range
+                 else config.light_intensity)
+        world_config = replace(config, seed=world_collect_seed(config.seed, seed), light_intensity=light)
+        jobs.append(WorldJob(index, seed, world_config,
                              worlds.generator, str(out / WORLDS_DIR / f"world-{seed}.json"), str(folder),
                              EPOCH + index * WORLD_TIME_SLOT))
     result.resumed = len(finished)
@@ -209,7 +230,8 @@ def assemble(out: Path, outcomes: list[WorldOutcome]) -> Path:
             names = [r[len(new):].split(", ", 1)[0] for r in (rows[0], rows[-1])] if rows else ["", ""]
             writer.writerow([o.seed, seed_range_of(o.seed) or "none", line + 1 if rows else "",
                              line + len(rows) if rows else "", len(rows), *names, o.interventions, o.collect_seed,
-                             f"{WORLDS_DIR}/world-{o.seed}.json", o.track_sha256, GENERATOR_VERSION])
+                             f"{WORLDS_DIR}/world-{o.seed}.json", o.track_sha256, GENERATOR_VERSION,
+                             f"{o.light_intensity:g}"])
             line += len(rows)
         write_text(out / WORLDS_CSV, table.getvalue())
     shutil.rmtree(partial, ignore_errors=True)
