@@ -79,30 +79,38 @@ class WireLimits:
 
 
 class FaultLog:
-    """One warning line per kind of fault per ``interval_s`` (the rest counted, and said on the next line).
+    """At most ``burst`` lines per kind of fault per ``interval_s`` (the rest counted, and said on the next line).
 
     Why: input a client can send must never flood the log (one "46" once meant 4,000 tracebacks).
-    Every fault is counted in ``counters`` whether or not its line is written.
+    Every fault is counted in ``counters`` whether or not its line is written. ``level`` and ``burst``
+    serve events that are not faults but that a client can repeat at will (connecting, say).
     """
 
-    def __init__(self, counters: FaultCounters, interval_s: float = 5.0) -> None:
+    def __init__(self, counters: FaultCounters, interval_s: float = 5.0, level: int = logging.WARNING,
+                 burst: int = 1, logger: logging.Logger = log) -> None:
         self.counters = counters
+        self.logger = logger
         self.interval_s = interval_s
-        self._last: dict[str, float] = {}
+        self.level = level
+        self.burst = burst
+        self._last: dict[str, float] = {}  # start of the kind's current interval
+        self._used: dict[str, int] = {}  # lines written in it
         self._suppressed: dict[str, int] = {}
 
     def report(self, kind: str, message: str, *args: Any, count: bool = True) -> None:
-        """Log ``message % args`` unless a line of this kind was written less than ``interval_s`` ago;
-        ``count=False`` for faults counted elsewhere (per client)."""
+        """Log ``message % args`` unless ``burst`` lines of this kind were written in the current
+        interval; ``count=False`` for faults counted elsewhere (per client)."""
         if count:
             self.counters.add(kind)
         now = monotonic()
-        if now - self._last.get(kind, -1e18) < self.interval_s:
+        if now - self._last.get(kind, -1e18) >= self.interval_s:
+            self._last[kind], self._used[kind] = now, 0
+        if self._used[kind] >= self.burst:
             self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
             return
-        self._last[kind] = now
+        self._used[kind] += 1
         more = self._suppressed.pop(kind, 0)
-        log.warning(message + (f" [{more} more like it not logged]" if more else ""), *args)
+        self.logger.log(self.level, message + (f" [{more} more like it not logged]" if more else ""), *args)
 
 
 # -- packets -------------------------------------------------------------------------------------

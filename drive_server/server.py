@@ -53,6 +53,7 @@ log = logging.getLogger(__name__)
 
 #: At most one malformed-frame warning per client in this many seconds.
 WARN_INTERVAL_S = 5.0
+SESSION_LOG_INTERVAL_S, SESSION_LOG_BURST = 10.0, 20  # connect/disconnect lines: 20 of each per 10 s
 #: Connection slots beyond ``max_connections`` in eventlet's pool, so refusals are answered at once
 #: instead of waiting in the accept queue behind a full pool.
 SPARE_SLOTS = 64
@@ -76,6 +77,8 @@ class DriveServer:
         self.limits = config.limits
         self.faults = FaultCounters()
         self.fault_log = FaultLog(self.faults, WARN_INTERVAL_S)
+        # a client can reconnect in a loop: its connect/disconnect lines are bounded like its faults
+        self.session_log = FaultLog(FaultCounters(), SESSION_LOG_INTERVAL_S, logging.INFO, SESSION_LOG_BURST, log)
         eio = self.sio.eio
         eio._async = dict(eio._async)  # our own copy of the driver table (the module-level one stays stock)
         eio._async["websocket"] = limited_websocket_class(eio._async["websocket"], self.limits, self.fault_log)
@@ -100,14 +103,16 @@ class DriveServer:
         agent = environ.get("HTTP_USER_AGENT", "?")
         peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
         self.clients[sid] = self._new_client(sid, agent)
-        log.info("client %s connected from %s (%s); %d connected", sid, peer, agent, len(self.clients))
+        self.session_log.report("connect", "client %s connected from %s (%s); %d connected", sid, peer, agent,
+                                len(self.clients), count=False)
 
     def _on_disconnect(self, sid: str, reason: Any = None) -> None:
         client = self.clients.pop(sid, None)
         if client is not None:
             for name in self.history.add(client.stats):
                 self._logged_upto.pop(name, None)
-            log.info("client %s disconnected (%s): %s", sid, reason, summary_line(client.stats.summary()))
+            self.session_log.report("disconnect", "client %s disconnected (%s): %s", sid, reason,
+                                    summary_line(client.stats.summary()), count=False)
 
     def _new_client(self, sid: str, agent: str) -> ClientState:
         eio_sid = self.sio.manager.eio_sid_from_sid(sid, "/")

@@ -65,3 +65,16 @@ def test_close_reasons_fit_a_control_frame():
 def test_limits_are_checked(kwargs):
     with pytest.raises(ValueError):
         WireLimits(**kwargs)
+
+
+def test_a_burst_allows_that_many_lines_per_interval_at_the_given_level(caplog):
+    events = FaultLog(FaultCounters(), interval_s=3600, level=logging.INFO, burst=3)
+    with caplog.at_level(logging.INFO, logger="drive_server.limits"):
+        for i in range(10):
+            events.report("connect", "client %d", i, count=False)
+    assert [r.getMessage() for r in caplog.records] == ["client 0", "client 1", "client 2"]
+    assert {r.levelno for r in caplog.records} == {logging.INFO} and not events.counters.as_dict()
+    events._last.clear()  # the next interval
+    with caplog.at_level(logging.INFO, logger="drive_server.limits"):
+        events.report("connect", "client %d", 10, count=False)
+    assert caplog.records[-1].getMessage() == "client 10 [7 more like it not logged]"

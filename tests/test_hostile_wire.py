@@ -244,3 +244,17 @@ def test_connection_limit_refuses_with_503_and_one_log_line(small_server):
     with UnityWireClient(small_server.url) as c:  # a slot is free again
         assert isinstance(c.exchange(GOOD)[0], SteerCommand)
     assert small_server.log().count("connection limit (2, --max-connections) reached") == 1
+
+
+@pytest.mark.parametrize("small_server", [["--max-connections", "8"]], indirect=True)
+def test_a_client_reconnecting_in_a_loop_cannot_flood_the_log(small_server):
+    """Every connect and disconnect wrote a line: a reconnect loop was a log flood at INFO."""
+    for _ in range(60):
+        with UnityWireClient(small_server.url) as c:
+            assert isinstance(c.exchange(GOOD)[0], SteerCommand)
+    with UnityWireClient(small_server.url) as c:  # the server still answers
+        assert isinstance(c.exchange(GOOD)[0], SteerCommand)
+    time.sleep(0.5)
+    text = small_server.log()
+    assert 20 <= text.count(" connected from ") <= 40  # 20 per 10 s, the rest counted
+    assert 20 <= text.count(" disconnected (") <= 40
