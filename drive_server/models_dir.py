@@ -8,13 +8,14 @@ from pathlib import Path
 from protocol.facts import BEHAVIORS
 
 PRETRAINED_PACKAGE = "models.pretrained"
-DEFAULT_MODEL_NAME = "simplistic.onnx"
+#: What drive_server and rbc demo serve without --model: the generalist, which matches the specialists on
+#: their home tracks (README "Generalisation") and also drives roads it never saw.
+DEFAULT_MODEL_NAME = "generalist_pilotnet.onnx"
 
 
 def default_model_path() -> Path:
-    """Path of the bundled simplistic model (it may not exist yet: the caller checks)."""
+    """Path of the default bundled model (it may not exist yet: the caller checks)."""
     return Path(str(resources.files(PRETRAINED_PACKAGE) / DEFAULT_MODEL_NAME))
-
 
 
 def bundled_model_path(behavior: str = "simplistic") -> Path:

@@ -108,21 +108,22 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace, vehicle: str = 
 
     This process and the server it starts are pinned to the same CPU (children inherit the
     affinity), so the figure is what a single core sustains: render, JPEG, Unity wire, decode,
-    inference, control and physics. Uses the bundled simplistic model (random weights if absent).
+    inference, control and physics. Uses the bundled simplistic model (random weights if absent), not
+    the default model, so the figure stays comparable with the benchmark's history.
     """
     if args.no_lap or not any(t.name == "lake" for t in tracks):
         return None
     import os
     import tempfile
 
-    from drive_server.models_dir import default_model_path
+    from drive_server.models_dir import bundled_model_path
     from tools.sim.drivers import SocketDriver
     from tools.sim.scenario import ScenarioConfig
     from tools.sim.session import run_scenario
     from tools.wire.server_process import ServerProcess
 
     with tempfile.TemporaryDirectory(prefix="rbc_simbench_") as tmp:
-        model = default_model_path()
+        model = bundled_model_path("simplistic")
         if not model.is_file():
             from tools.bench.onnx_builders import save_model
 

@@ -7,9 +7,9 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import file_sha256, write_text
+from drive_server.runrecords import write_text
 from tools.errors import CommandError
-from tools.evaluate.compare import build_table, measure_latency, training_summary
+from tools.evaluate.compare import build_table, evaluated_model, measure_latency, training_summary
 
 log = logging.getLogger("rbc.compare")
 
@@ -42,21 +42,6 @@ def _table9(args: argparse.Namespace) -> int:
     print(table)
     print(f"wrote {args.out}")
     return 0
-
-
-def evaluated_model(results: dict, eval_dir: Path) -> Path:
-    """The model file an evaluation drove: the path as given to rbc eval, else its absolute form (so a
-    compare run from another folder finds it); one line when it has moved or changed since."""
-    meta = results["meta"]
-    given = Path(meta["model"])
-    found = next((p for p in (given, Path(meta.get("model_resolved", given))) if p.is_file()), None)
-    if found is None:
-        raise CommandError(f"{eval_dir}: its model {given} is not found (moved, or a path relative to another "
-                           "folder)", "run rbc compare from the folder rbc eval ran in, or evaluate it again")
-    if file_sha256(found) != meta["model_sha256"]:
-        raise CommandError(f"{eval_dir}: {found} has changed since it was evaluated (sha256 differs)",
-                           "evaluate the model again")
-    return found
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,8 +21,9 @@ from tools.sim.scenario import ScenarioConfig
 log = logging.getLogger("rbc.demo")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--behavior", choices=BEHAVIORS, default="simplistic",
-                   help="which bundled model, and its track (default simplistic on lake)")
+    p.add_argument("--behavior", choices=BEHAVIORS, default=None,
+                   help="drive a bundled specialist on its own track (simplistic, collision: lake; rigorous: "
+                        "mountain) instead of the default model, the generalist, on lake")
     p.add_argument("--model", type=Path, default=None, help="drive with this ONNX model instead of a bundled one")
     p.add_argument("--laps", type=int, default=ScenarioConfig.laps, help="laps to drive (default %(default)s)")
     p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
@@ -47,7 +48,7 @@ def _server_latency(stats_path: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.models_dir import bundled_model_path
+    from drive_server.models_dir import bundled_model_path, default_model_path
     from drive_server.runrecords import write_json
     from tools.console import Progress
     from tools.sim.drivers import SocketDriver
@@ -57,13 +58,13 @@ def run(args: argparse.Namespace) -> int:
     from tools.sim.viz import StripCollector, write_trajectory_map
     from tools.wire.server_process import ServerProcess, ServerStartError
 
-    model = args.model or bundled_model_path(args.behavior)
+    model = args.model or (bundled_model_path(args.behavior) if args.behavior else default_model_path())
     if not model.is_file():
         raise CommandError(f"model not found: {model}", "pass --model PATH to an .onnx file")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     stats_path = out / "server_stats.json"
-    setup = SETUPS[args.behavior]  # the scene each bundled behavior was trained on, so is demonstrated on
+    setup = SETUPS[args.behavior or "simplistic"]  # a specialist's training scene; the generalist's: lake
     config = ScenarioConfig(track=setup.track, cones=setup.cones, cone_seed=setup.cone_seed, laps=args.laps,
                             speed_limit_kmh=args.speed_limit, vehicle=args.vehicle)
     strip = StripCollector(every_s=8.0)

@@ -21,7 +21,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--server", default=None, help="fuzz a running server at this URL instead of starting one "
                    "(then RSS and file descriptors are measured only with --pid)")
     p.add_argument("--pid", type=int, default=None, help="process id of the --server, for RSS and fd counts")
-    p.add_argument("--model", type=Path, default=None, help="ONNX model of the started server (default: bundled)")
+    p.add_argument("--model", type=Path, default=None,
+                   help="ONNX model of the started server (default: the bundled simplistic.onnx, the model the "
+                        "campaign's published figures were measured with)")
     p.add_argument("--server-args", default="", help="extra drive_server arguments, e.g. \"--max-pending 32\"")
     p.add_argument("--telemetries", type=int, default=100_000, help="telemetries of the campaign (default 100,000)")
     p.add_argument("--healthy", type=int, default=8, help="healthy 30 Hz clients in the fairness phase (default 8)")
@@ -43,9 +45,10 @@ def run(args: argparse.Namespace) -> int:
     if args.server:
         url = args.server
     else:
-        from drive_server.models_dir import default_model_path
+        from drive_server.models_dir import bundled_model_path
 
-        server = ServerProcess(args.model or default_model_path(), ["--log-every", "0", *args.server_args.split()])
+        model = args.model or bundled_model_path("simplistic")
+        server = ServerProcess(model, ["--log-every", "0", *args.server_args.split()])
         url = server.start()
         pid = server.pid
     try:
