@@ -82,11 +82,11 @@ class FaultLog:
     """At most ``burst`` lines per kind of fault per ``interval_s`` (the rest counted, and said on the next line).
 
     Why: input a client can send must never flood the log (one "46" once meant 4,000 tracebacks).
-    Every fault is counted in ``counters`` whether or not its line is written. ``level`` and ``burst``
-    serve events that are not faults but that a client can repeat at will (connecting, say).
+    Every fault is counted in ``counters`` whether or not its line is written. ``level``, ``burst`` and
+    no ``counters`` serve events that are not faults but that a client can repeat at will (connecting, say).
     """
 
-    def __init__(self, counters: FaultCounters, interval_s: float = 5.0, level: int = logging.WARNING,
+    def __init__(self, counters: FaultCounters | None, interval_s: float = 5.0, level: int = logging.WARNING,
                  burst: int = 1, logger: logging.Logger = log) -> None:
         self.counters = counters
         self.logger = logger
@@ -100,7 +100,7 @@ class FaultLog:
     def report(self, kind: str, message: str, *args: Any, count: bool = True) -> None:
         """Log ``message % args`` unless ``burst`` lines of this kind were written in the current
         interval; ``count=False`` for faults counted elsewhere (per client)."""
-        if count:
+        if count and self.counters is not None:
             self.counters.add(kind)
         now = monotonic()
         if now - self._last.get(kind, -1e18) >= self.interval_s:

@@ -78,7 +78,7 @@ class DriveServer:
         self.faults = FaultCounters()
         self.fault_log = FaultLog(self.faults, WARN_INTERVAL_S)
         # a client can reconnect in a loop: its connect/disconnect lines are bounded like its faults
-        self.session_log = FaultLog(FaultCounters(), SESSION_LOG_INTERVAL_S, logging.INFO, SESSION_LOG_BURST, log)
+        self.session_log = FaultLog(None, SESSION_LOG_INTERVAL_S, logging.INFO, SESSION_LOG_BURST, log)
         eio = self.sio.eio
         eio._async = dict(eio._async)  # our own copy of the driver table (the module-level one stays stock)
         eio._async["websocket"] = limited_websocket_class(eio._async["websocket"], self.limits, self.fault_log)
@@ -104,7 +104,7 @@ class DriveServer:
         peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
         self.clients[sid] = self._new_client(sid, agent)
         self.session_log.report("connect", "client %s connected from %s (%s); %d connected", sid, peer, agent,
-                                len(self.clients), count=False)
+                                len(self.clients))
 
     def _on_disconnect(self, sid: str, reason: Any = None) -> None:
         client = self.clients.pop(sid, None)
@@ -112,7 +112,7 @@ class DriveServer:
             for name in self.history.add(client.stats):
                 self._logged_upto.pop(name, None)
             self.session_log.report("disconnect", "client %s disconnected (%s): %s", sid, reason,
-                                    summary_line(client.stats.summary()), count=False)
+                                    summary_line(client.stats.summary()))
 
     def _new_client(self, sid: str, agent: str) -> ClientState:
         eio_sid = self.sio.manager.eio_sid_from_sid(sid, "/")

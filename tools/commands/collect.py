@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -72,14 +71,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _light_range(text: str) -> tuple[float, float]:
-    """``LO:HI`` with 0 < LO <= HI (argparse turns the ValueError into a one-line usage error)."""
+    """``LO:HI`` for argparse, which turns the ArgumentTypeError into a one-line usage error."""
+    from tools.sim.collect_worlds import light_range_problem
+
     lo, sep, hi = text.partition(":")
     try:
-        values = (float(lo), float(hi)) if sep else ()
+        values = (float(lo), float(hi)) if sep else None
     except ValueError:
-        values = ()
-    if not values or not 0 < values[0] <= values[1] < math.inf:
-        raise argparse.ArgumentTypeError(f"expected LO:HI with 0 < LO <= HI, e.g. 0.5:2, got {text!r}")
+        values = None
+    problem = light_range_problem(*values) if values else f"expected LO:HI, e.g. 0.5:2, got {text!r}"
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
     return values
 
 

@@ -18,6 +18,7 @@ import csv
 import io
 import json
 import logging
+import math
 import os
 import shutil
 import time
@@ -59,6 +60,13 @@ def training_seed_problem(first: int, count: int) -> str | None:
             f"training worlds are {train.start:,}-{train.stop - 1:,}): held-out worlds must never be trained on")
 
 
+def light_range_problem(lo: float, hi: float) -> str | None:
+    """Why ``lo``..``hi`` is not a range of light intensities to draw from (None: it is)."""
+    if not 0 < lo <= hi < math.inf:
+        return f"expected LO:HI with 0 < LO <= HI, e.g. 0.5:2, got {lo:g}:{hi:g}"
+    return None
+
+
 @dataclass(frozen=True)
 class WorldsConfig:
     first_seed: int = 0
@@ -70,10 +78,9 @@ class WorldsConfig:
     light_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
-        if self.light_range is not None:
-            lo, hi = self.light_range
-            if not 0 < lo <= hi:
-                raise ValueError(f"--light-range must be LO:HI with 0 < LO <= HI, got {lo:g}:{hi:g}")
+        problem = light_range_problem(*self.light_range) if self.light_range is not None else None
+        if problem:
+            raise ValueError(f"--light-range: {problem}")
         if not 1 <= self.count <= MAX_WORLDS:
             raise ValueError(f"--worlds must be 1..{MAX_WORLDS}, got {self.count}")
         if self.first_seed < 0:
