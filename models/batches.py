@@ -31,13 +31,14 @@ class TrainingSet:
     has_sides: np.ndarray  # bool, aligned with ``indices``
     deletion_rate: float
     batch_size: int
+    groups: np.ndarray | None = None  # recording id per sample, aligned with ``indices``: balance recordings
 
 
 def epoch_batches(augmenter: FastAugmenter, data: TrainingSet, seed: int, epoch: int, start: int,
                   stop: int) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
     """(step, x, y) for steps ``start`` .. ``stop - 1`` of ``epoch``, computed in the calling thread."""
     stream = index_batches(data.steering, data.deletion_rate, data.batch_size,
-                           np.random.default_rng([seed, epoch, _INDEX_STREAM]))
+                           np.random.default_rng([seed, epoch, _INDEX_STREAM]), data.groups)
     for step, local in enumerate(itertools.islice(stream, start, stop), start=start):
         rng = np.random.default_rng([seed, epoch, _AUGMENT, step])
         x, y = augment_batch(augmenter, data.indices[local], data.steering[local], data.has_sides[local], rng)

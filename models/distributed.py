@@ -93,7 +93,8 @@ def shard(data: TrainingSet, world: World) -> TrainingSet:
                                "give a --batch-size divisible by --nproc_per_node")
     take = slice(world.rank, None, world.size)
     return replace(data, indices=data.indices[take], steering=data.steering[take], has_sides=data.has_sides[take],
-                   batch_size=data.batch_size // world.size)
+                   batch_size=data.batch_size // world.size,
+                   groups=None if data.groups is None else data.groups[take])
 
 
 def rank_seed(seed: int, world: World) -> int:

@@ -20,6 +20,7 @@ VAL_FRACTION = 0.2
 class SplitKind(StrEnum):
     BLOCKS = "blocks"  # contiguous stretches of the log held out (honest on real recordings)
     RANDOM = "random"  # random frames held out (the paper's setting; optimistic at 9-15 Hz)
+    RECORDINGS = "recordings"  # whole recordings held out: what a new driver's data looks like
 
 
 @dataclass(frozen=True)
@@ -83,8 +84,34 @@ def block_split(n: int, seed: int, spec: SplitSpec = SplitSpec()) -> tuple[np.nd
     return train, np.flatnonzero(is_val)
 
 
-def make_split(n: int, seed: int, spec: SplitSpec) -> tuple[np.ndarray, np.ndarray]:
-    """The split ``spec`` asks for, over ``n`` samples in log order."""
+def recording_split(recording: np.ndarray, seed: int, spec: SplitSpec = SplitSpec(),
+                    held_out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(train, validation) positions holding out whole recordings (``recording[i]``: sample i's recording id).
+
+    ``held_out`` (bool per recording id) names them; otherwise round(recordings x val_fraction) of them (at
+    least one, never all) are drawn by ``seed``. Different drivers, sessions and days differ far more than two
+    stretches of one recording do, so this is the split whose figures say how a model does for someone else.
+    """
+    recording = np.asarray(recording)
+    ids = np.unique(recording)
+    if held_out is None:
+        if len(ids) < 2:
+            raise ValueError("--split recordings needs at least two recordings (repeat --data)")
+        n_val = min(len(ids) - 1, max(1, round(len(ids) * spec.val_fraction)))
+        chosen = np.random.default_rng([seed, 0x12EC]).choice(ids, size=n_val, replace=False)
+    else:
+        chosen = np.flatnonzero(held_out)
+    is_val = np.isin(recording, chosen)
+    if is_val.all() or not is_val.any():
+        raise ValueError("holding out recordings left no training or no validation samples")
+    return np.flatnonzero(~is_val), np.flatnonzero(is_val)
+
+
+def make_split(n: int, seed: int, spec: SplitSpec, recording: np.ndarray | None = None,
+               held_out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The split ``spec`` asks for, over ``n`` samples in log order (``recording``: each one's recording id)."""
     if spec.kind is SplitKind.RANDOM:
         return split_indices(n, seed, spec.val_fraction)
+    if spec.kind is SplitKind.RECORDINGS:
+        return recording_split(np.zeros(n, int) if recording is None else recording, seed, spec, held_out)
     return block_split(n, seed, spec)

@@ -115,7 +115,7 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
     log.info("%s", data.summary(config.data_options()))
     augmenter = FastAugmenter(data.cache, pipeline.augment)
     tset = TrainingSet(data.train, data.targets[data.train], data.has_sides[data.train], pipeline.deletion_rate,
-                       config.batch_size)
+                       config.batch_size, data.recording_groups(data.train) if config.balance_recordings else None)
     tset = ddp.shard(tset, world)  # this rank's samples and share of the batch (all of both in one process)
     log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
              config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,
@@ -225,7 +225,9 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
     if config.export == "best" and best is not None and state.best_epoch:
         model.load_state_dict(best)
         exported_epoch = state.best_epoch
-    metrics = steering_metrics(predict(model, data, pipeline, data.val, config.batch_size), data.steering[data.val])
+    predicted = predict(model, data, pipeline, data.val, config.batch_size)
+    metrics = steering_metrics(predicted, data.steering[data.val])
+    by_recording = per_recording_metrics(data, predicted)
     val_loss = state.history[exported_epoch - 1]["val_loss"] if state.history else float("nan")
     info = {"arch": config.arch, "behavior": config.behavior, "approach": config.approach, "val_mse": val_loss,
             "epochs": len(state.history), "train_samples": int(len(data.train)), "seed": config.seed,
@@ -238,10 +240,22 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
     record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
     record["result"] = {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
                         "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,
-                        "rows": data.counts, "onnx_max_diff": diff}
+                        "rows": data.counts, "onnx_max_diff": diff, "val_by_recording": by_recording}
     runrecords.write_json(run_dir / runfiles.CONFIG, record)
     return TrainResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate,
-                       info={**info, "metrics": metrics, "summary": data.summary(config.data_options())})
+                       info={**info, "metrics": metrics, "summary": data.summary(config.data_options()),
+                             "val_by_recording": by_recording})
+
+
+def per_recording_metrics(data: PreparedData, predicted: np.ndarray) -> list[dict[str, Any]]:
+    """Held-out MSE, r and always-0 MSE of each recording that has validation frames (log order)."""
+    groups = data.recording_groups(data.val)
+    out = []
+    for g in np.unique(groups):
+        mine = groups == g
+        m = steering_metrics(predicted[mine], data.steering[data.val][mine])
+        out.append({"log": str(data.dataset.reports[int(g)].log), **m, "beats_zero": m["mse"] < m["zero_mse"]})
+    return out
 
 
 def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
@@ -269,7 +283,8 @@ def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool, world: ddp
         raise RunDirError(f"{run_dir} already holds a run: pass --resume to continue it, or choose another --out")
     if not config.data:
         raise RunDirError("no --data given")
-    return replace(config, data=[str(Path(d).resolve()) for d in config.data])
+    return replace(config, data=[str(Path(d).resolve()) for d in config.data],
+                   val_data=[str(Path(d).resolve()) for d in config.val_data])
 
 
 class _StopFlag:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from drive_server.contract import ContractError
@@ -45,6 +45,9 @@ class TrainConfig:
     speed_unit: str = "mph"  # unit of the log's speed column: mph (Udacity) or kmh (the paper's simulator)
     smooth_labels: int = 0  # train on a centred moving average of the steering over N frames (0: as recorded)
     row_stride: int = 1  # train and validate on every Nth row of the logs (1: every row)
+    val_data: list[str] = field(default_factory=list)  # recordings held out whole (implies split "recordings")
+    balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
+    label_lag: int = 0  # train on the steering recorded this many frames after the frame
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -55,6 +58,10 @@ class TrainConfig:
             raise ValueError(f"export must be best or last, not {self.export!r}")
         if self.brightness_mode not in ("add", "scale"):
             raise ValueError(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
+        if self.val_data:
+            self.split = "recordings"
+        if not 0 <= self.label_lag <= 100:
+            raise ValueError(f"label lag must be 0..100 frames, got {self.label_lag}")
         if not 1 <= self.row_stride <= 1000:
             raise ValueError(f"row stride must be 1..1000, got {self.row_stride}")
         if self.min_speed < 0:
@@ -79,7 +86,7 @@ class TrainConfig:
 
     def data_options(self) -> DataOptions:
         return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels,
-                           self.row_stride)
+                           self.row_stride, tuple(self.val_data), self.balance_recordings, self.label_lag)
 
     def pipeline(self) -> Pipeline:
         """The behavior's pipeline with this run's crop and brightness settings applied."""

@@ -32,6 +32,11 @@ class DataOptions:
     # every Nth row of the logs (1: all). Neighbouring frames at 15 Hz are near-copies, so a stride keeps the
     # roads and cuts the frame cache N-fold: PilotNet's 200x66 frames of 380,000 rows would need ~46 GB
     row_stride: int = 1
+    # recordings held out whole as the validation set (implies the recordings split); the rest trains
+    val_data: tuple[str, ...] = ()
+    balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
+    # training labels: the steering recorded this many frames later (drivers react a few frames after they see)
+    label_lag: int = 0
 
     def slow(self, speeds: np.ndarray) -> np.ndarray:
         """Rows slower than ``min_speed``, comparing both speeds in km/h."""
@@ -52,6 +57,11 @@ class PreparedData:
     counts: dict[str, int] = field(default_factory=dict)
     split: SplitSpec = field(default_factory=SplitSpec)
     labels: np.ndarray | None = None  # training targets (smoothed steering), every sample; None: ``steering``
+    recording: np.ndarray | None = None  # index of each sample's log in ``dataset.reports``
+
+    def recording_groups(self, positions: np.ndarray) -> np.ndarray:
+        """The recording id of each sample at ``positions`` (all zeros for a one-log data set)."""
+        return np.zeros(len(positions), np.int64) if self.recording is None else self.recording[positions]
 
     @property
     def targets(self) -> np.ndarray:
@@ -67,6 +77,8 @@ class PreparedData:
         else:
             slow = "no speed filter"
         gap = f", {c['gap']} dropped beside held-out blocks" if c.get("gap") else ""
+        if self.split.kind is SplitKind.RECORDINGS:
+            gap = f": {c['val_recordings']} of {c['recordings']} recordings held out"
         stride = f", 1 row in {c['stride']} used" if c.get("stride", 1) > 1 else ""
         return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images){stride}, "
                 f"{c['unreadable']} with unreadable frames, {slow}; {c['kept']} kept: "
@@ -75,9 +87,13 @@ class PreparedData:
 
 def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, options: DataOptions = DataOptions(),
                  workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
-    dataset = read_logs(data)
+    dataset = read_logs([*data, *options.val_data])
     if options.row_stride > 1:
         dataset = DataSet(dataset.samples[::options.row_stride], dataset.reports)
+    recording = recording_ids(dataset)
+    held_out = None
+    if options.val_data:
+        held_out = np.arange(len(dataset.reports)) >= len(dataset.reports) - len(options.val_data)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
     speeds = np.array([s.speed for s in dataset.samples], np.float64)
     slow = options.slow(speeds)
@@ -88,7 +104,7 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
                            f"{' at or above the minimum speed' if slow.any() else ''} in {dataset.logs}")
     # split the log as recorded, then drop what is unusable: blocks stay stretches of real time, and runs with
     # other filters (or crops) of the same data hold out the same stretches
-    train, val = make_split(len(dataset.samples), seed, options.split)
+    train, val = make_split(len(dataset.samples), seed, options.split, recording, held_out)
     keep = cache.valid & ~slow
     train, val = train[keep[train]], val[keep[val]]
     if not len(train) or not len(val):
@@ -102,11 +118,33 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
               "skipped": sum(len(r.skipped) for r in dataset.reports),
               "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
               "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
-              "gap": int(len(usable) - len(train) - len(val))}
+              "gap": int(len(usable) - len(train) - len(val)),
+              "recordings": len(dataset.reports), "val_recordings": int(len(np.unique(recording[val])))}
     labels = None
+    if options.label_lag:
+        labels = lagged_labels(steering, recording, options.label_lag)
     if options.smooth_frames > 1:
-        labels = smooth_labels(dataset, steering, options.smooth_frames, np.isin(np.arange(len(steering)), train))
-    return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels)
+        labels = smooth_labels(dataset, steering if labels is None else labels, options.smooth_frames,
+                               np.isin(np.arange(len(steering)), train))
+    return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels, recording)
+
+
+def recording_ids(dataset: DataSet) -> np.ndarray:
+    """Index into ``dataset.reports`` of each sample's log."""
+    index = {r.log: i for i, r in enumerate(dataset.reports)}
+    return np.array([index[s.log] for s in dataset.samples], np.int64)
+
+
+def lagged_labels(steering: np.ndarray, recording: np.ndarray, lag: int) -> np.ndarray:
+    """Each frame labelled with the steering recorded ``lag`` frames later in its own recording (the last
+    frames of a recording keep its last value). A driver steers a few frames after the picture that
+    called for it, more so with a mouse; the frame shows what the later steering answers."""
+    out = steering.copy()
+    for r in np.unique(recording):
+        idx = np.flatnonzero(recording == r)
+        shifted = np.concatenate([steering[idx][lag:], np.repeat(steering[idx][-1:], min(lag, len(idx)))])
+        out[idx] = shifted[:len(idx)]
+    return out
 
 
 def smooth_labels(dataset: DataSet, steering: np.ndarray, frames: int, use: np.ndarray) -> np.ndarray:

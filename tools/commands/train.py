@@ -21,10 +21,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-size", type=int, default=TrainConfig.batch_size, help="default %(default)s")
     parser.add_argument("--seed", type=int, default=TrainConfig.seed, help="split, balancing, augmentation and "
                         "initialisation seed (default %(default)s)")
-    parser.add_argument("--split", choices=("blocks", "random"), default=TrainConfig.split,
+    parser.add_argument("--split", choices=("blocks", "random", "recordings"), default=TrainConfig.split,
                         help="blocks: hold out contiguous stretches of the log (what a new road looks like); "
                              "random: hold out random frames, the paper's setting, optimistic at 9-15 Hz because "
-                             "neighbouring frames are near-copies (the bundled models were trained with random)")
+                             "neighbouring frames are near-copies (the bundled models were trained with random); "
+                             "recordings: hold out a fifth of the --data recordings whole (what a new driver's "
+                             "data looks like), chosen by --seed")
+    parser.add_argument("--val-data", action="append", default=[], metavar="DIR",
+                        help="a recording held out whole for validation (repeat; implies --split recordings): "
+                             "e.g. one fold of other drivers' recordings")
+    parser.add_argument("--balance-recordings", action="store_true",
+                        help="each recording gives a pass over the data at most as many samples as the median "
+                             "recording, drawn afresh each pass, so one long recording does not dominate")
+    parser.add_argument("--label-lag", type=int, default=TrainConfig.label_lag, metavar="N",
+                        help="label each frame with the steering recorded N frames later (drivers steer a few "
+                             "frames after the picture that calls for it); 0: as recorded")
     parser.add_argument("--block-frames", type=int, default=TrainConfig.block_frames,
                         help="frames per held-out block with --split blocks (shortened for logs under 5 blocks)")
     parser.add_argument("--gap-frames", type=int, default=TrainConfig.gap_frames,
@@ -66,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
                          batch_size=args.batch_size, seed=args.seed, max_steps_per_epoch=args.max_steps_per_epoch,
                          split=args.split, block_frames=args.block_frames, gap_frames=args.gap_frames,
                          export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
-                         smooth_labels=args.smooth_labels, row_stride=args.row_stride,
+                         smooth_labels=args.smooth_labels, row_stride=args.row_stride, val_data=args.val_data,
+                         balance_recordings=args.balance_recordings, label_lag=args.label_lag,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
     if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)
@@ -82,6 +94,20 @@ def run(args: argparse.Namespace) -> int:
     info = result.info
     print(f"exported epoch {info['exported_epoch']} ({info['export']}); held-out frames ({info['split']} split): "
           f"{format_metrics(info['metrics'])}")
+    by_recording = info.get("val_by_recording", [])
+    if len(by_recording) > 1:
+        beats = sum(m["beats_zero"] for m in by_recording)
+        print(f"per held-out recording ({beats} of {len(by_recording)} beat always-0):")
+        for m in by_recording:
+            print(f"  {_recording_name(m['log']):<40} {format_metrics(m)}{'' if m['beats_zero'] else '  (not)'}")
     print(f"model: {result.onnx} (val MSE {result.val_loss:.5f}; ONNX Runtime matches PyTorch to "
           f"{result.export_diff:.1e}); {result.samples_per_s:.0f} training samples/s")
     return 0
+
+
+def _recording_name(log: str) -> str:
+    """A recording's folder name (its log is usually ``FOLDER/driving_log.csv``)."""
+    from pathlib import Path
+
+    path = Path(log)
+    return path.parent.name if path.suffix == ".csv" else path.name

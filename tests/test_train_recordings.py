@@ -1,0 +1,88 @@
+"""Training across recordings (issue 22): whole recordings held out, per-recording held-out figures,
+recordings balanced against each other, and labels lagged behind the frame."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.balance import balanced_pass, group_cap
+from models.split import SplitSpec, make_split, recording_split
+from models.trainingdata import lagged_labels
+
+SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
+
+
+def test_recording_split_holds_out_whole_recordings_chosen_by_seed() -> None:
+    recording = np.repeat(np.arange(10), [30, 5, 50, 7, 9, 40, 3, 3, 20, 11])
+    train, val = recording_split(recording, seed=4)
+    assert set(recording[train]).isdisjoint(recording[val])
+    assert len(np.unique(recording[val])) == 2  # a fifth of ten
+    assert len(train) + len(val) == len(recording)
+    again = recording_split(recording, seed=4)
+    assert np.array_equal(again[1], val)
+    others = [tuple(np.unique(recording[recording_split(recording, seed=s)[1]])) for s in range(8)]
+    assert len(set(others)) > 1
+
+
+def test_named_recordings_are_the_validation_set() -> None:
+    recording = np.repeat(np.arange(3), 4)
+    train, val = make_split(12, 0, SplitSpec("recordings"), recording, np.array([False, True, False]))
+    assert np.array_equal(val, np.arange(4, 8)) and np.array_equal(train, np.r_[0:4, 8:12])
+
+
+def test_one_recording_cannot_be_split_by_recording() -> None:
+    with pytest.raises(ValueError, match="at least two recordings"):
+        recording_split(np.zeros(20, int), seed=0)
+
+
+def test_balancing_caps_each_recording_at_the_median_per_pass() -> None:
+    groups = np.repeat([0, 1, 2], [1000, 100, 50])
+    steering = np.full(len(groups), 0.1)
+    rng = np.random.default_rng(0)
+    passes = [balanced_pass(steering, 0.0, rng, groups) for _ in range(30)]
+    for p in passes:
+        counts = np.bincount(groups[p], minlength=3)
+        assert list(counts) == [100, 100, 50]
+    seen = np.unique(np.concatenate(passes))
+    assert np.isin(np.flatnonzero(groups == 0), seen).mean() > 0.9  # drawn afresh: the long one is still seen
+    assert group_cap(groups) == 100
+
+
+def test_balancing_without_groups_draws_as_before() -> None:
+    steering = np.r_[np.zeros(50), np.full(50, 0.2)]
+    a = balanced_pass(steering, 0.7, np.random.default_rng(3))
+    b = balanced_pass(steering, 0.7, np.random.default_rng(3), None)
+    assert np.array_equal(a, b) and len(a) == 100 - 35
+
+
+def test_lagged_labels_stay_within_their_recording() -> None:
+    steering = np.array([0.0, 0.1, 0.2, 0.3, 1.0, 0.9, 0.8], np.float32)
+    recording = np.array([0, 0, 0, 0, 1, 1, 1])
+    out = lagged_labels(steering, recording, 2)
+    assert list(out) == pytest.approx([0.2, 0.3, 0.3, 0.3, 0.8, 0.8, 0.8])
+
+
+@pytest.mark.slow
+def test_training_with_held_out_recordings_reports_each_of_them(tmp_path: Path) -> None:
+    pytest.importorskip("torch")
+    from models.train import TrainConfig, train
+
+    logs = []
+    for name in ("driver-a", "driver-b", "driver-c"):
+        shutil.copytree(SAMPLE, tmp_path / name)
+        logs.append(str(tmp_path / name))
+    config = TrainConfig(data=logs[:2], val_data=logs[2:], out=str(tmp_path / "run"), epochs=1, max_steps_per_epoch=2,
+                         threads=1, decode_workers=1, progress=False, balance_recordings=True, label_lag=1)
+    assert config.split == "recordings"
+    result = train(config)
+    record = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert record["rows"]["val"] == 36 and record["rows"]["train"] == 72 and record["rows"]["val_recordings"] == 1
+    (held,) = record["result"]["val_by_recording"]
+    assert Path(held["log"]).parent.name == "driver-c" and held["n"] == 36
+    assert held["beats_zero"] == (held["mse"] < held["zero_mse"])
+    assert "1 of 3 recordings held out" in result.info["summary"]
