@@ -4,6 +4,8 @@ Real logs are messy: no header or a header row, absolute Windows paths from anot
 separators, ``7.8E-05`` numbers, one camera (empty left/right fields) or three. Only the file name of
 a recorded path is trusted: images are looked up next to the log (``DIR/IMG/<name>`` first). Bad rows
 are skipped and reported with file and line so a broken recording is noticed, never silently trained on.
+A missing or unreadable side frame (left/right) only costs that row its sides: the centre frame and the
+label are still good, and copies of recordings often carry the centre camera alone.
 Stdlib only; the writer is :mod:`protocol.datalog_writer`.
 """
 
@@ -59,21 +61,36 @@ class SkippedRow:
 
 @dataclass
 class LogReport:
-    """What happened to each row of one log: used or skipped (with line and reason)."""
+    """What happened to each row of one log: used or skipped (with line and reason).
+
+    ``side_losses`` has one entry per side frame that was missing or unreadable; its row was used without
+    sides (left = right = None).
+    """
 
     log: Path
     rows: int = 0
     used: int = 0
     skipped: list[SkippedRow] = field(default_factory=list)
+    side_losses: list[SkippedRow] = field(default_factory=list)
+
+    @property
+    def rows_without_sides(self) -> int:
+        """Used rows that lost their side frames (a missing or unreadable left/right frame)."""
+        return len({s.line for s in self.side_losses})
 
     def summary(self) -> str:
-        if not self.skipped:
-            return f"{self.log}: {self.used} samples"
-        kinds = Counter(s.reason.split(":")[0] for s in self.skipped)
-        first = self.skipped[0]
-        detail = ", ".join(f"{k}: {n}" for k, n in kinds.most_common())
-        return (f"{self.log}: {self.used} samples, {len(self.skipped)} of {self.rows} rows skipped ({detail}); "
-                f"first: line {first.line}: {first.reason}")
+        text = f"{self.log}: {self.used} samples"
+        if self.skipped:
+            kinds = Counter(s.reason.split(":")[0] for s in self.skipped)
+            first = self.skipped[0]
+            detail = ", ".join(f"{k}: {n}" for k, n in kinds.most_common())
+            text += (f", {len(self.skipped)} of {self.rows} rows skipped ({detail}); "
+                     f"first: line {first.line}: {first.reason}")
+        if self.side_losses:
+            first = self.side_losses[0]
+            text += (f"; {self.rows_without_sides} rows used without side frames; "
+                     f"first: line {first.line}: {first.reason}")
+        return text
 
 
 @dataclass
@@ -116,19 +133,19 @@ def read_log(path: Path | str) -> tuple[list[Sample], LogReport]:
             cells = [c.strip() for c in row]
             if not any(cells):
                 continue
-            if columns is None and report.rows == 0 and _is_header(cells):
+            if columns is None and report.rows == 0 and is_header(cells):
                 columns = _header_columns(cells, log_path, line_no)
                 continue
             report.rows += 1
             try:
-                samples.append(_parse_row(cells, columns, resolver, log_path, line_no))
+                samples.append(_parse_row(cells, columns, resolver, log_path, line_no, report.side_losses))
             except _RowError as exc:
                 report.skipped.append(SkippedRow(line_no, str(exc)))
     report.used = len(samples)
     if not samples:
         why = f" ({report.skipped[0].reason} at line {report.skipped[0].line})" if report.skipped else ""
         raise DataLogError(f"{log_path}: no usable samples in {report.rows} rows{why}")
-    if report.skipped:
+    if report.skipped or report.side_losses:
         log.warning("%s", report.summary())
     return samples, report
 
@@ -150,7 +167,8 @@ class _RowError(ValueError):
     pass
 
 
-def _is_header(cells: Sequence[str]) -> bool:
+def is_header(cells: Sequence[str]) -> bool:
+    """Whether the stripped cells of a log's first row are a header (its steering cell is not a number)."""
     try:
         float(cells[3] if len(cells) >= 7 else cells[1])
     except (ValueError, IndexError):
@@ -195,12 +213,13 @@ def _number(cells: Sequence[str], columns: dict[str, int], name: str, required: 
 
 
 def _parse_row(cells: list[str], columns: dict[str, int] | None, resolver: _ImageResolver, log_path: Path,
-               line: int) -> Sample:
+               line: int, side_losses: list[SkippedRow]) -> Sample:
     cols = columns if columns is not None else positional_columns(len(cells))
     steering = _number(cells, cols, "steering", required=True)
     if abs(steering) > 1.0 + 1e-6:
         raise _RowError(f"bad number: steering {steering} outside -1..1 (not normalised?)")
     paths: dict[str, Path | None] = {}
+    losses: list[SkippedRow] = []
     for cam in ("center", "left", "right"):
         i = cols.get(cam)
         recorded = cells[i] if i is not None and i < len(cells) else ""
@@ -209,14 +228,22 @@ def _parse_row(cells: list[str], columns: dict[str, int] | None, resolver: _Imag
                 raise _RowError("missing image: no center frame recorded")
             paths[cam] = None
             continue
-        paths[cam] = resolver.resolve(recorded)
+        try:
+            paths[cam] = resolver.resolve(recorded)
+        except _RowError as exc:
+            if cam == "center":
+                raise
+            losses.append(SkippedRow(line, str(exc)))  # the row stays, without sides
+            paths[cam] = None
     if (paths["left"] is None) != (paths["right"] is None):
         paths["left"] = paths["right"] = None  # one side only: perspective shifts need both
     center = paths["center"]
     assert center is not None
-    return Sample(center=center, left=paths["left"], right=paths["right"], steering=max(-1.0, min(1.0, steering)),
-                  throttle=_number(cells, cols, "throttle", False), brake=_number(cells, cols, "brake", False),
-                  speed=_number(cells, cols, "speed", False), log=log_path, line=line)
+    sample = Sample(center=center, left=paths["left"], right=paths["right"], steering=max(-1.0, min(1.0, steering)),
+                    throttle=_number(cells, cols, "throttle", False), brake=_number(cells, cols, "brake", False),
+                    speed=_number(cells, cols, "speed", False), log=log_path, line=line)
+    side_losses.extend(losses)  # only for rows that are used
+    return sample
 
 
 class _ImageResolver:

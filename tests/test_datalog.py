@@ -72,17 +72,37 @@ def test_missing_images_and_bad_numbers_are_reported_and_skipped(tmp_path: Path,
     ])
     (rec / "IMG" / "c2.jpg").write_bytes(b"not a jpeg at all")
     samples, report = read_log(rec)
-    assert [s.line for s in samples] == [1, 5]
-    assert samples[1].brake == 0.0  # empty optional number
+    assert [s.line for s in samples] == [1, 3, 5]
+    assert samples[2].brake == 0.0  # empty optional number
     skipped = {s.line: s.reason for s in report.skipped}
-    assert sorted(skipped) == [2, 3, 4, 6, 7, 8]
+    assert sorted(skipped) == [2, 4, 6, 7, 8]
     assert skipped[2].startswith("missing image") and "missing.jpg" in skipped[2]
-    assert skipped[3].startswith("missing image") and "gone.jpg" in skipped[3]
     assert skipped[4].startswith("unreadable image") and "c2.jpg" in skipped[4]
     assert skipped[6].startswith("bad number") and "outside" in skipped[6]
     assert skipped[8] == "bad number: steering 'abc'"
-    assert "6 of 8 rows skipped" in report.summary()
+    # a missing side frame costs the row its sides, not the row (was: skipped as "missing image")
+    assert samples[1].left is None and samples[1].right is None and not samples[1].has_sides
+    assert [(s.line, s.reason.split(":")[0]) for s in report.side_losses] == [(3, "missing image")]
+    assert "gone.jpg" in report.side_losses[0].reason and report.rows_without_sides == 1
+    assert "5 of 8 rows skipped" in report.summary() and "1 rows used without side frames" in report.summary()
     assert any("rows skipped" in r.getMessage() for r in caplog.records)
+
+
+def test_missing_or_unreadable_side_frames_leave_the_row_without_sides(tmp_path: Path) -> None:
+    rec, _ = _recording(tmp_path, [
+        "IMG/c0.jpg, IMG/gone.jpg, IMG/r0.jpg, 0.1, 0, 0, 1",
+        "IMG/c1.jpg, IMG/l1.jpg, IMG/r1.jpg, 0.2, 0, 0, 1",
+        "IMG/c2.jpg, IMG/l2.jpg, IMG/r2.jpg, 0.3, 0, 0, 1",
+        "IMG/gone.jpg, IMG/l3.jpg, IMG/r3.jpg, 0.4, 0, 0, 1",
+        "IMG/c3.jpg, IMG/gone.jpg, IMG/r3.jpg, 0.5, 0, 0, fast",
+    ])
+    (rec / "IMG" / "r2.jpg").write_bytes(b"not a jpeg")
+    samples, report = read_log(rec)
+    assert [(s.line, s.has_sides, s.left is None, s.right is None) for s in samples] == [
+        (1, False, True, True), (2, True, False, False), (3, False, True, True)]
+    assert [(s.line, s.reason.split(":")[0]) for s in report.side_losses] == [(1, "missing image"),
+                                                                              (3, "unreadable image")]
+    assert [s.line for s in report.skipped] == [4, 5]  # a missing centre frame still skips the row
 
 
 def test_one_camera_logs(tmp_path: Path) -> None:

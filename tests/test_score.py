@@ -81,3 +81,21 @@ def test_rbc_score_smooth_labels_adds_a_column_and_checks_its_value(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "tools.cli", "score", "--data", str(UDACITY_SAMPLE),
                           "--smooth-labels", "-1"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "Traceback" not in bad.stderr
+
+
+def test_rbc_score_scores_a_log_whose_side_frames_are_absent(tmp_path, capsys):
+    """Was: every row was skipped for a missing left/right frame, so a centre-only copy could not be scored."""
+    from tools.cli import main
+
+    data = tmp_path / "centre-only"
+    (data / "IMG").mkdir(parents=True)
+    (data / "driving_log.csv").write_bytes((UDACITY_SAMPLE / "driving_log.csv").read_bytes())
+    centres = sorted((UDACITY_SAMPLE / "IMG").glob("center_*.jpg"))
+    for frame in centres[1:]:  # the first row's centre frame is missing too: that row alone is skipped
+        (data / "IMG" / frame.name).write_bytes(frame.read_bytes())
+    samples, report = read_log(data)
+    assert len(samples) == len(centres) - 1 and [s.line for s in report.skipped] == [1]
+    assert all(s.left is None and s.right is None and not s.has_sides for s in samples)
+    assert main(["score", "--data", str(data), "--model", str(bundled_model_path("simplistic"))]) == 0
+    row = capsys.readouterr().out.splitlines()[1].split()
+    assert row[:2] == ["simplistic.onnx", str(len(centres) - 1)]
