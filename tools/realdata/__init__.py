@@ -1,0 +1,1 @@
+"""Real Udacity-simulator recordings: the public manifest, fetching, statistics and cleaning (``rbc data``)."""

@@ -1,0 +1,66 @@
+"""The public Udacity-simulator recordings this project trains and scores on, as data.
+
+``public_recordings.csv`` names each recording once: the GitHub repository and commit that hold it, the
+folder with ``driving_log.csv`` and ``IMG/`` in it, the rows that belong to it (one log may hold two
+tracks) and how its driver steered. The images are never committed here; ``rbc data fetch`` gets them.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable
+from dataclasses import dataclass
+from importlib import resources
+
+from tools.realdata.rows import RowRange, parse_rows
+
+MANIFEST = "public_recordings.csv"
+TRACKS = ("lake", "jungle", "mountain")
+INPUTS = ("keyboard", "mouse")
+
+
+@dataclass(frozen=True)
+class PublicRecording:
+    name: str  # unique; the folder ``rbc data fetch`` writes
+    track: str  # lake, jungle or mountain
+    repository: str  # GitHub owner/name
+    commit: str  # 40 hex digits: the recording as it was, whatever the repository does later
+    folder: str  # inside the repository, "" for its root, else ending in "/"
+    rows: RowRange | None  # 1-based rows of the log that are this recording; None: all
+    input: str  # keyboard or mouse
+
+    def paths(self) -> tuple[str, str]:
+        """The log and the image folder inside the repository."""
+        return f"{self.folder}driving_log.csv", f"{self.folder}IMG"
+
+
+def _parse(row: dict[str, str], line: int) -> PublicRecording:
+    folder = row["folder"].strip().strip("/")
+    rec = PublicRecording(name=row["name"].strip(), track=row["track"].strip(),
+                          repository=row["repository"].strip(), commit=row["commit"].strip(),
+                          folder=f"{folder}/" if folder else "", rows=parse_rows(row["rows"] or ""),
+                          input=row["input"].strip())
+    if rec.track not in TRACKS or rec.input not in INPUTS or len(rec.commit) != 40 or rec.repository.count("/") != 1:
+        raise ValueError(f"{MANIFEST}:{line}: bad entry {rec}")
+    return rec
+
+
+def public_recordings() -> list[PublicRecording]:
+    """Every entry of the manifest, in its order."""
+    text = resources.files(__package__).joinpath(MANIFEST).read_text(encoding="utf-8")
+    recs = [_parse(row, i) for i, row in enumerate(csv.DictReader(text.splitlines()), start=2)]
+    names = [r.name for r in recs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{MANIFEST}: recording names repeat")
+    return recs
+
+
+def select(recordings: Iterable[PublicRecording], track: str | None = None,
+           names: Iterable[str] | None = None) -> list[PublicRecording]:
+    """The recordings on ``track`` (None: all) and named in ``names`` (None: all); an unknown name is an error."""
+    recordings = list(recordings)
+    wanted = list(names or [])
+    unknown = sorted(set(wanted) - {r.name for r in recordings})
+    if unknown:
+        raise ValueError(f"unknown recording(s) {', '.join(unknown)}; known: {', '.join(r.name for r in recordings)}")
+    return [r for r in recordings if (track is None or r.track == track) and (not wanted or r.name in wanted)]
