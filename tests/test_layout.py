@@ -124,12 +124,6 @@ def test_no_import_cycles():
     assert cycles == []
 
 
-def test_no_module_is_over_300_lines():
-    long = {name: n for name, path in MODULES.items()
-            if (n := len(path.read_text(encoding="utf-8").splitlines())) > 300}
-    assert long == {}
-
-
 # --------------------------------------------------------------------------- one decode for serving and training
 
 

@@ -46,6 +46,7 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
     Subcommand("eval", "tools.commands.eval", "run the paper's robustness experiments on a model (Table 9)"),
     Subcommand("compare", "tools.commands.compare", "side-by-side comparison of models (Table 10)"),
     Subcommand("bench", "tools.commands.bench", "round-trip latency benchmark of drive_server over the Unity wire"),
+    Subcommand("data", "tools.commands.data", "real Unity recordings: stats, clean, fetch the public ones"),
     Subcommand("video", "tools.commands.video",
                "a browser-playable video of a recording (drive_server --record, rbc collect, Unity)"),
     Subcommand("fuzz", "tools.commands.fuzz",
@@ -54,6 +55,9 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "replay a driving log to a drive server as the Unity simulator would"),
     Subcommand("score", "tools.commands.score",
                "open-loop scores of models on a recorded driving log (e.g. real Unity frames)"),
+    Subcommand("import-peer", "tools.commands.import_peer", "import a peer's Keras 1 PilotNet .h5 as ONNX", "train"),
+    Subcommand("drive-log", "tools.commands.drive_log",
+               "closed loop on a recorded real drive: the model sees re-projected recorded frames (DAVE-2)"),
     Subcommand("world", "tools.commands.world", "write procedural worlds (track files) or a contact sheet of them"),
     Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),
     Subcommand("train-bench", "tools.commands.train_bench", "augmentation and training throughput; projected paper run",
@@ -108,7 +112,7 @@ def subcommand_parser(cmd: Subcommand, module: ModuleType) -> argparse.ArgumentP
 
 
 #: Argument names of output paths: created by a command, removed again if it fails leaving them empty.
-OUTPUT_ARGS = ("out", "json", "map", "strip", "video", "sheet")
+OUTPUT_ARGS = ("out", "json", "map", "strip", "video", "sheet", "plot")
 
 
 def main(argv: list[str] | None = None) -> int:

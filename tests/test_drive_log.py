@@ -1,0 +1,114 @@
+"""``rbc drive-log`` (issue 22): the closed loop on recorded frames must tell drivers apart, and its view
+synthesis must be geometry, not decoration."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from protocol.jpeg import read_jpeg_file
+from tools.cli import main
+from tools.drivelog.camera import UnityCamera, ViewSynthesizer, view_homographies
+from tools.drivelog.path import advance, curvature
+
+SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
+
+
+def _curve_log(tmp_path: Path, steering: float = 0.3, speed_mph: float = 20.0) -> Path:
+    """The sample's frames (and time stamps) with the steering of one long constant curve."""
+    out = tmp_path / "curve"
+    shutil.copytree(SAMPLE, out)
+    rows = list(csv.reader((out / "driving_log.csv").open(newline=""), skipinitialspace=True))
+    with (out / "driving_log.csv").open("w", newline="") as fh:
+        for r in rows:
+            csv.writer(fh).writerow([*r[:3], steering, 0.5, 0.0, speed_mph])
+    return out
+
+
+def test_not_moving_the_camera_shows_the_recorded_frame() -> None:
+    frame = read_jpeg_file(next((SAMPLE / "IMG").glob("center_*.jpg")))
+    assert np.array_equal(ViewSynthesizer().view(frame, 0.0, 0.0), frame)
+
+
+def test_turning_right_moves_the_far_scenery_left_by_f_tan_psi() -> None:
+    cam = UnityCamera()
+    _, far = view_homographies(cam, 0.0, math.radians(2.0))
+    p = far @ np.array([160.0, 40.0, 1.0])
+    assert p[0] / p[2] == pytest.approx(160 + cam.focal_px * math.tan(math.radians(2.0)), abs=0.5)
+
+
+def test_a_camera_moved_right_sees_the_road_shifted_left() -> None:
+    cam = UnityCamera()
+    ground, _ = view_homographies(cam, 0.5, 0.0)  # new view pixel -> recorded pixel
+    row = 120.0  # on the road: ground distance d = h / tan(angle below the horizon)
+    d = cam.height_m / math.tan(math.radians(cam.pitch_deg) + math.atan((row - 80) / cam.focal_px))
+    p = ground @ np.array([160.0, row, 1.0])
+    # the new centre pixel looks at the ground point 0.5 m right of the recorded camera's centre line
+    assert p[0] / p[2] > 160 and p[1] / p[2] == pytest.approx(row, abs=0.5)
+    assert (p[0] / p[2] - 160) == pytest.approx(cam.focal_px * 0.5 / math.hypot(d, cam.height_m), rel=0.15)
+
+
+def test_a_driver_steering_as_the_path_stays_on_it_and_a_straight_one_leaves_a_curve() -> None:
+    k = float(curvature(0.3))
+    on, off = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    for _ in range(30):
+        on = advance(*on, 7.0, 0.1, k, k)
+        off = advance(*off, 7.0, 0.1, 0.0, k)
+    assert on[1:] == (0.0, 0.0) and on[0] == pytest.approx(21.0)
+    assert off[1] < -1.0  # the curve turns right; going straight leaves it to the left
+
+
+@pytest.mark.parametrize(("driver", "passes"), [
+    (["--baseline", "recorded"], True),
+    (["--baseline", "zero"], False),
+    (["--baseline", "recorded", "--steer-bias", "0.3"], False),
+])
+def test_the_measure_discriminates(tmp_path: Path, driver: list[str], passes: bool) -> None:
+    data = _curve_log(tmp_path)
+    out = tmp_path / "result.json"
+    rc = main(["drive-log", "--data", str(data), *driver, "--wheelbase", "2.6", "--json", str(out),
+               "--strip", str(tmp_path / "strip.jpg"), "--plot", str(tmp_path / "offset.png")])
+    assert rc == 0
+    record = json.loads(out.read_text())
+    assert {"eta", "interventions", "offset_rms_m", "frames"} <= set(record)
+    assert record["frames"] == 36 and record["rules"]["wheelbase_m"] == 2.6
+    if passes:
+        assert record["eta"] >= 99.0 and record["interventions"] == 0 and record["offset_rms_m"] == 0.0
+    else:
+        assert record["interventions"] >= 1 and record["eta"] < 50.0
+    assert (tmp_path / "strip.jpg").stat().st_size > 1000 and (tmp_path / "offset.png").stat().st_size > 1000
+
+
+def test_a_model_drives_through_the_serving_pipeline(tmp_path: Path) -> None:
+    model = Path(__file__).resolve().parents[1] / "models" / "pretrained" / "simplistic.onnx"
+    out = tmp_path / "r.json"
+    assert main(["drive-log", "--data", str(_curve_log(tmp_path)), "--model", str(model), "--wheelbase", "2.6",
+                 "--json", str(out), "--strip", str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png")]) == 0
+    record = json.loads(out.read_text())
+    assert record["driver"] == "simplistic.onnx" and 0.0 <= record["eta"] <= 100.0
+
+
+@pytest.mark.parametrize("argv", [
+    ["drive-log", "--data", "/nonexistent/recording", "--baseline", "zero"],
+    ["drive-log", "--data", str(SAMPLE)],
+    ["drive-log", "--data", str(SAMPLE), "--baseline", "zero", "--max-offset", "0"],
+    ["drive-log", "--data", str(SAMPLE), "--model", __file__],
+])
+def test_bad_input_is_one_line(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rbc drive-log: error") and "\n" not in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_calibration_finds_the_side_cameras_on_their_sides(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["drive-log", "--data", str(SAMPLE), "--calibrate", "--calibrate-rows", "8"]) == 0
+    rows = {line.split()[0]: line.split() for line in capsys.readouterr().out.splitlines()[1:]}
+    assert float(rows["left"][3]) < -0.2 and float(rows["right"][3]) > 0.2
+    assert 2.0 < float(rows["left"][2]) < 12.0

@@ -1,0 +1,47 @@
+"""Who drives the closed loop: a model through drive_server's own pipeline, or a baseline that tests the measure.
+
+``recorded`` steers as the person did and must stay on the path (the measure's sanity check); ``zero``
+never steers and must fail on the curves; ``--steer-bias`` shifts any of them and must make it fail.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tools.drivelog.loop import Driver
+from tools.drivelog.path import RecordedDrive
+
+
+def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bias: float = 0.0) -> tuple[Driver, str]:
+    """(driver, its name for the record). Exactly one of ``model`` and ``baseline`` is given."""
+    if model is not None:
+        from drive_server.model import SteeringModel
+        from drive_server.pipeline import DrivePipeline
+
+        pipeline = DrivePipeline(SteeringModel(Path(model)))
+
+        def base(view: np.ndarray, i: int) -> float:
+            return pipeline.steer(view)
+
+        name = Path(model).name
+    elif baseline == "recorded":
+        def base(view: np.ndarray, i: int) -> float:
+            return float(log.steering[i])
+
+        name = "recorded steering"
+    elif baseline == "zero":
+        def base(view: np.ndarray, i: int) -> float:
+            return 0.0
+
+        name = "always 0"
+    else:
+        raise ValueError(f"unknown baseline {baseline!r}")
+    if not bias:
+        return base, name
+
+    def biased(view: np.ndarray, i: int) -> float:
+        return float(np.clip(base(view, i) + bias, -1.0, 1.0))
+
+    return biased, f"{name} {bias:+g}"

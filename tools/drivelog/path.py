@@ -1,0 +1,98 @@
+"""The recorded drive as a path: where each centre frame was taken, rebuilt from speed, steering and time.
+
+The log has no positions, only the speed, the wheel angle (steering x 25 deg) and, in the frame names,
+the time. A kinematic bicycle integrates them: the path's curvature at a frame is tan(delta) / L.
+
+Each frame was taken on this path, looking along it, so a driver that steers as recorded sees the
+recorded frames unchanged and stays exactly where the person drove. Keyboard drivers tap, so the path
+zig-zags around what they meant, but by little: against the path smoothed over 3 frames its offset is
+0.07 m rms (0.25 m at the 99th percentile) on a lake recording, far inside the lane margin.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from protocol.datalog import Sample
+from protocol.units import SpeedUnit, to_kmh
+from tools.realdata.stamps import frame_time, session_ids
+
+#: Largest steering angle of the simulator, degrees (normalised steering x this).
+MAX_STEER_DEG = 25.0
+#: Wheelbase of the Udacity car, metres (a mid-size saloon; only scales how fast steering turns the car).
+WHEELBASE_M = 2.6
+#: Frame intervals beyond this are a pause (or a restart) of the recording: a new session starts.
+SESSION_GAP_S = 1.0
+#: Frame interval assumed where the names carry no time stamps (the simulator records at about 10 Hz).
+DEFAULT_DT_S = 0.1
+
+
+
+def curvature(steering: np.ndarray | float, wheelbase_m: float = WHEELBASE_M) -> np.ndarray:
+    """Path curvature (1/m, positive turning right) of a normalised steering value."""
+    return np.tan(np.radians(np.asarray(steering, np.float64) * MAX_STEER_DEG)) / wheelbase_m
+
+
+@dataclass(frozen=True)
+class RecordedDrive:
+    """Per centre frame, in log order: its file, recorded steering, speed (m/s), interval to the next
+    frame (s), session number, and arc length along its session (m)."""
+
+    frames: list[Path]
+    steering: np.ndarray
+    speed: np.ndarray
+    dt: np.ndarray
+    session: np.ndarray
+    arc: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def session_range(self, session: int) -> range:
+        idx = np.flatnonzero(self.session == session)
+        return range(int(idx[0]), int(idx[-1]) + 1)
+
+
+def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUnit.MPH) -> RecordedDrive:
+    """Rebuild the path of a log's centre frames (rows without a centre frame are not in ``samples``)."""
+    if not samples:
+        raise ValueError("the log has no rows with a centre frame")
+    times = [frame_time(s.center) for s in samples]
+    session = np.array(session_ids(times, SESSION_GAP_S), np.int64)
+    dt = np.full(len(samples), DEFAULT_DT_S)
+    for i in range(len(samples) - 1):
+        a, b = times[i], times[i + 1]
+        if a is not None and b is not None and session[i] == session[i + 1]:
+            dt[i] = min(max(b - a, 0.0), SESSION_GAP_S)
+    last_of_session = np.r_[session[1:] != session[:-1], True]
+    dt[last_of_session] = 0.0
+    speed = to_kmh(np.array([s.speed for s in samples], np.float64), speed_unit) / 3.6
+    step = speed * dt
+    arc = np.zeros(len(samples))
+    for i in range(1, len(samples)):
+        arc[i] = 0.0 if session[i] != session[i - 1] else arc[i - 1] + step[i - 1]
+    steering = np.array([s.steering for s in samples], np.float64)
+    return RecordedDrive([s.center for s in samples], steering, speed, dt, session, arc)
+
+
+def advance(s: float, e: float, psi: float, v: float, dt: float, k_car: float, k_lane: float
+            ) -> tuple[float, float, float]:
+    """One step of a bicycle of curvature ``k_car`` in the Frenet frame of a path of curvature ``k_lane``
+    (state: arc length, offset + right, heading error + right)."""
+    ds = v * dt * math.cos(psi) / max(0.2, 1.0 - e * k_lane)
+    return s + ds, e + v * dt * math.sin(psi), psi + v * dt * k_car - k_lane * ds
+
+
+def heading_change(drive: RecordedDrive, wheelbase_m: float = WHEELBASE_M) -> float:
+    """Total absolute turning of the recorded path, degrees (a lap of a closed track is about 360+)."""
+    return float(np.degrees(np.sum(np.abs(curvature(drive.steering, wheelbase_m) * drive.speed * drive.dt))))
+
+
+def radius_m(steering: float, wheelbase_m: float = WHEELBASE_M) -> float:
+    """Turning radius of a steering value (inf when straight)."""
+    k = float(curvature(steering, wheelbase_m))
+    return math.inf if k == 0 else 1.0 / abs(k)

@@ -1,0 +1,77 @@
+"""Pictures of a closed loop on a recording: a strip of the synthesized views, and the offset over time.
+
+Drawn with OpenCV and the project's text helper, so ``rbc drive-log`` needs no plotting package.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tools.drivelog.loop import LoopResult
+from tools.sim.text import draw_text
+
+_RED, _GREY, _BLUE, _WHITE = (60, 60, 230), (150, 150, 150), (200, 120, 40), (245, 245, 245)
+
+
+def write_strip(result: LoopResult, path: Path, columns: int = 4) -> Path:
+    """The kept views (RGB) in a grid, each labelled with its offset, heading and steering (BGR JPEG/PNG)."""
+    shots = sorted(result.snapshots, key=lambda s: s.step)
+    if not shots:
+        raise ValueError("no views were kept")
+    h, w = shots[0].view.shape[:2]
+    rows = -(-len(shots) // columns)
+    sheet = np.zeros((rows * h, min(columns, len(shots)) * w, 3), np.uint8)
+    for k, shot in enumerate(shots):
+        tile = cv2.cvtColor(shot.view, cv2.COLOR_RGB2BGR)
+        label = f"#{shot.step}  e {shot.offset_m:+.2f} m  psi {shot.heading_deg:+.1f}  steer {shot.steering:+.2f}"
+        draw_text(tile, label, (4, 14), px=11, box=True)
+        if shot.takeover:
+            cv2.rectangle(tile, (1, 1), (w - 2, h - 2), _RED, 3)
+            draw_text(tile, "take-over: left the lane", (4, h - 28), px=11, color=_RED, box=True)
+        r, c = divmod(k, columns)
+        sheet[r * h:(r + 1) * h, c * w:(c + 1) * w] = tile
+    _write(path, sheet)
+    return path
+
+
+def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[int, int] = (1000, 300)) -> Path:
+    """Lateral offset from the recorded path at every step; the lane margins dashed, take-overs in red."""
+    width, height = size
+    left, right, top, bottom = 56, 12, 28, 30
+    img = np.full((height, width, 3), 255, np.uint8)
+    n = max(2, len(result.offsets))
+    limit = result.rules.max_offset_m
+    span = max(limit * 1.5, float(np.max(np.abs(result.offsets))) if len(result.offsets) else 0.0)
+
+    def xy(i: float, e: float) -> tuple[int, int]:
+        x = left + (width - left - right) * i / (n - 1)
+        y = top + (height - top - bottom) * (0.5 - e / (2 * span))
+        return int(round(x)), int(round(y))
+
+    for e in (-limit, limit):
+        for x0 in range(left, width - right, 12):
+            cv2.line(img, (x0, xy(0, e)[1]), (min(x0 + 6, width - right), xy(0, e)[1]), _GREY, 1)
+    cv2.line(img, xy(0, 0), xy(n - 1, 0), (210, 210, 210), 1)
+    if len(result.offsets) > 1:
+        pts = np.array([xy(i, e) for i, e in enumerate(result.offsets)], np.int32)
+        cv2.polylines(img, [pts], False, _BLUE, 1, cv2.LINE_AA)
+    for t in result.takeovers:
+        cv2.circle(img, xy(t.step, t.offset_m), 4, _RED, -1, cv2.LINE_AA)
+    for e in (-limit, 0.0, limit):
+        draw_text(img, f"{e:+.1f} m", (4, xy(0, e)[1] + 4), px=11, color=(60, 60, 60))
+    draw_text(img, title, (left, 18), px=13, color=(30, 30, 30))
+    draw_text(img, f"frame of the log (0 .. {n - 1}); red: take-overs ({result.interventions})", (left, height - 8),
+              px=11, color=(60, 60, 60))
+    _write(path, img)
+    return path
+
+
+def _write(path: Path, bgr: np.ndarray) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
+    if not cv2.imwrite(str(tmp), bgr):
+        raise OSError(f"{path}: could not write the picture")
+    tmp.replace(path)

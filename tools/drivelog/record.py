@@ -1,0 +1,34 @@
+"""The result record of a closed loop on a recording: small, flat, and enough to compare runs."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
+from tools.drivelog.loop import LoopResult
+
+
+def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias: float,
+                  camera: UnityCamera = DEFAULT_CAMERA) -> dict[str, Any]:
+    """``eta`` (percent), ``interventions``, ``offset_rms_m`` and ``frames``, with what they were measured under."""
+    return {
+        "data": str(data),
+        "driver": driver,
+        "steer_bias": bias,
+        "eta": round(result.eta, 2),
+        "interventions": result.interventions,
+        "offset_rms_m": round(result.offset_rms_m, 4),
+        "offset_max_m": round(float(np.max(np.abs(result.offsets))) if len(result.offsets) else 0.0, 4),
+        "heading_rms_deg": round(float(np.sqrt(np.mean(result.headings ** 2))) if len(result.headings) else 0.0, 3),
+        "frames": frames,
+        "steps": result.frames,
+        "driving_time_s": round(result.driving_time_s, 2),
+        "takeovers": [{"frame": t.step, "time_s": round(t.time_s, 2), "offset_m": round(t.offset_m, 3)}
+                      for t in result.takeovers],
+        "rules": asdict(result.rules),
+        "camera": asdict(camera),
+    }
