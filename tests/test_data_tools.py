@@ -253,3 +253,20 @@ def test_fetch_of_a_missing_repository_is_one_line_naming_it(local_repos, capsys
     assert "owner/none" in err and "1 of 1 recordings not fetched" in err
     assert not out.exists()  # nothing fetched: the new empty output is removed
     assert "unknown recording" in _error(capsys, ["data", "fetch", "--out", str(out), "--name", "nope"])
+
+
+def test_every_public_recording_is_in_a_fold_and_a_driver_in_one_fold_only() -> None:
+    from tools.realdata.recordings import fold_arguments, public_recordings
+
+    recs = public_recordings()
+    assert {r.fold for r in recs} == {"A", "B", "C", "D"}
+    owner_folds: dict[str, set[str]] = {}
+    for r in recs:
+        owner_folds.setdefault(r.repository.split("/")[0], set()).add(r.fold)
+    assert all(len(f) == 1 for f in owner_folds.values())
+    for fold in "ABCD":
+        held = {r.track for r in recs if r.fold == fold}
+        assert {"lake", "jungle"} <= held
+        args = fold_arguments(recs, "real/", fold)
+        assert args.count("--val-data") == sum(r.fold == fold for r in recs) and len(args) == 2 * len(recs)
+        assert "real/0xR4Y" in args

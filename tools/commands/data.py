@@ -17,7 +17,9 @@ from tools.realdata.recordings import TRACKS
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
-                                help="stats: a table per recording; clean: a cleaned log; fetch: the public recordings")
+                                help="stats: a table per recording; clean: a cleaned log; fetch: the public "
+                                     "recordings; "
+                                     "fold: rbc train arguments holding one fold of them out")
     formatter = parser.formatter_class
     stats = sub.add_parser("stats", formatter_class=formatter, help="one line of figures per recording, and a total",
                            description="rows, frames, frame rate, sessions, steering, speed, duplicates and "
@@ -57,13 +59,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="where the repositories are: URL/owner/name")
 
 
+    fold = sub.add_parser("fold", formatter_class=formatter, help="rbc train arguments holding one fold out",
+                          description="print --data ROOT/NAME for the public recordings outside fold F and "
+                                      "--val-data ROOT/NAME for those in it (cross-validation by driver)")
+    fold.add_argument("fold", metavar="F", help="the fold to hold out (A, B, C or D: the manifest's fold column)")
+    fold.add_argument("--root", default="real", metavar="DIR", help="where rbc data fetch put the recordings")
+
+
 def _session_gap(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--session-gap", type=float, default=1.0, metavar="S",
                         help="a jump of the frame time stamps by more than S seconds starts a new session")
 
 
 def run(args: argparse.Namespace) -> int:
-    return {"stats": _stats, "clean": _clean, "fetch": _fetch}[args.action](args)
+    return {"stats": _stats, "clean": _clean, "fetch": _fetch, "fold": _fold}[args.action](args)
+
+
+def _fold(args: argparse.Namespace) -> int:
+    from tools.realdata.recordings import fold_arguments, public_recordings
+
+    print(" ".join(fold_arguments(public_recordings(), args.root, args.fold)))
+    return 0
 
 
 def _stats(args: argparse.Namespace) -> int:

@@ -28,6 +28,9 @@ class PublicRecording:
     folder: str  # inside the repository, "" for its root, else ending in "/"
     rows: RowRange | None  # 1-based rows of the log that are this recording; None: all
     input: str  # keyboard or mouse
+    # cross-validation fold (A-D): a driver's recordings share one, and every fold holds lake, jungle and
+    # (but for one) mountain recordings, so each is held out once from a model trained on all the others
+    fold: str = ""
 
     def paths(self) -> tuple[str, str]:
         """The log and the image folder inside the repository."""
@@ -39,7 +42,7 @@ def _parse(row: dict[str, str], line: int) -> PublicRecording:
     rec = PublicRecording(name=row["name"].strip(), track=row["track"].strip(),
                           repository=row["repository"].strip(), commit=row["commit"].strip(),
                           folder=f"{folder}/" if folder else "", rows=parse_rows(row["rows"] or ""),
-                          input=row["input"].strip())
+                          input=row["input"].strip(), fold=(row.get("fold") or "").strip())
     if rec.track not in TRACKS or rec.input not in INPUTS or len(rec.commit) != 40 or rec.repository.count("/") != 1:
         raise ValueError(f"{MANIFEST}:{line}: bad entry {rec}")
     return rec
@@ -53,6 +56,15 @@ def public_recordings() -> list[PublicRecording]:
     if len(set(names)) != len(names):
         raise ValueError(f"{MANIFEST}: recording names repeat")
     return recs
+
+
+def fold_arguments(recordings: Iterable[PublicRecording], root: str, fold: str) -> list[str]:
+    """``rbc train`` arguments holding fold ``fold`` out: ``--data ROOT/NAME`` for the others, ``--val-data`` for it."""
+    recordings = list(recordings)
+    if fold not in {r.fold for r in recordings}:
+        raise ValueError(f"unknown fold {fold!r}; folds: {', '.join(sorted({r.fold for r in recordings}))}")
+    root = root.rstrip("/")
+    return [a for r in recordings for a in ("--val-data" if r.fold == fold else "--data", f"{root}/{r.name}")]
 
 
 def select(recordings: Iterable[PublicRecording], track: str | None = None,
