@@ -10,6 +10,8 @@ from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipel
 from models.split import SplitSpec
 from models.trainingdata import DataOptions
 
+#: Lateral offset of the side cameras from the centre one, metres (the design card; Eq. 4/5's numerator).
+SIDE_CAMERA_OFFSET_M = 0.95
 #: Brightness range of ``brightness_mode="scale"`` when none is given: gain 1 +- 0.5.
 SCALE_BRIGHTNESS_RANGE = 0.5
 #: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
@@ -48,6 +50,9 @@ class TrainConfig:
     val_data: list[str] = field(default_factory=list)  # recordings held out whole (implies split "recordings")
     balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
     label_lag: int = 0  # train on the steering recorded this many frames after the frame
+    # side-camera label correction: the distance (m) in which a car 0.95 m off would be back (Eq. 4/5: gamma =
+    # 0.95 / this); None: the paper's 10 m. Shorter teaches a stronger pull back to the centre line
+    recovery_distance: float | None = None
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -60,6 +65,8 @@ class TrainConfig:
             raise ValueError(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
         if self.val_data:
             self.split = "recordings"
+        if self.recovery_distance is not None and not 1.0 <= self.recovery_distance <= 100.0:
+            raise ValueError(f"recovery distance must be 1..100 m, got {self.recovery_distance}")
         if not 0 <= self.label_lag <= 100:
             raise ValueError(f"label lag must be 0..100 frames, got {self.label_lag}")
         if not 1 <= self.row_stride <= 1000:
@@ -97,4 +104,6 @@ class TrainConfig:
         if brightness_range is None:
             brightness_range = SCALE_BRIGHTNESS_RANGE if self.brightness_mode == "scale" else p.augment.brightness_range
         augment = replace(p.augment, brightness_mode=self.brightness_mode, brightness_range=brightness_range)
+        if self.recovery_distance is not None:
+            augment = replace(augment, gamma=SIDE_CAMERA_OFFSET_M / self.recovery_distance)
         return replace(p, contract=contract, augment=augment)

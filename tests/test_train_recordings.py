@@ -86,3 +86,17 @@ def test_training_with_held_out_recordings_reports_each_of_them(tmp_path: Path) 
     assert Path(held["log"]).parent.name == "driver-c" and held["n"] == 36
     assert held["beats_zero"] == (held["mse"] < held["zero_mse"])
     assert "1 of 3 recordings held out" in result.info["summary"]
+
+
+def test_a_shorter_recovery_distance_pulls_side_frames_back_harder() -> None:
+    from models.augment import LEFT, RIGHT, perspective_label
+    from models.train_config import TrainConfig
+
+    paper = TrainConfig(data=["x"], out="y").pipeline().augment.gamma
+    strong = TrainConfig(data=["x"], out="y", recovery_distance=5).pipeline().augment.gamma
+    assert paper == pytest.approx(0.095) and strong == pytest.approx(0.19)
+    for gamma, expected_deg in ((paper, 5.43), (strong, 10.76)):  # atan(gamma): aim at the point M metres ahead
+        left, right = perspective_label(np.zeros(2), np.array([LEFT, RIGHT]), gamma)
+        assert left * 25 == pytest.approx(expected_deg, abs=0.01) and right == pytest.approx(-left)
+    with pytest.raises(ValueError, match="recovery distance"):
+        TrainConfig(data=["x"], out="y", recovery_distance=0.5)

@@ -79,7 +79,8 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     print(f"drive-log {args.data}: {len(log)} frames, {result.frames} steps, {result.driving_time_s:.0f} s driving "
           f"{limit}, driver {name}")
     print(f"degree of autonomy {result.eta:.1f} %  interventions {result.interventions}  "
-          f"offset rms {result.offset_rms_m:.2f} m  max {record['offset_max_m']:.2f} m")
+          f"({record['seconds_per_takeover']:.1f} s of driving per take-over)  offset rms {result.offset_rms_m:.2f} m  "
+          f"max {record['offset_max_m']:.2f} m")
     title = f"{name} on {Path(args.data).name}: eta {result.eta:.1f} %, {result.interventions} take-overs"
     print(f"strip {write_strip(result, args.strip)}")
     print(f"plot  {write_offset_plot(result, args.plot, title)}")

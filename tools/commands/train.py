@@ -33,6 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--balance-recordings", action="store_true",
                         help="each recording gives a pass over the data at most as many samples as the median "
                              "recording, drawn afresh each pass, so one long recording does not dominate")
+    parser.add_argument("--recovery-distance", type=float, default=TrainConfig.recovery_distance, metavar="M",
+                        help="side-camera labels steer a car 0.95 m off back within M metres (Eq. 4/5, gamma = "
+                             "0.95 / M; default: the paper's 10); shorter teaches a stronger pull to the centre line")
     parser.add_argument("--label-lag", type=int, default=TrainConfig.label_lag, metavar="N",
                         help="label each frame with the steering recorded N frames later (drivers steer a few "
                              "frames after the picture that calls for it); 0: as recorded")
@@ -79,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
                          export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
                          smooth_labels=args.smooth_labels, row_stride=args.row_stride, val_data=args.val_data,
                          balance_recordings=args.balance_recordings, label_lag=args.label_lag,
+                         recovery_distance=args.recovery_distance,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
     if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)

@@ -9,5 +9,12 @@ Owns: the real simulator's camera model and its calibration from the side camera
 ``calibrate``), the recorded path (``path``), the loop and its drivers (``loop``), and its pictures
 (``pictures``). May import ``protocol``, ``drive_server`` (the serving pipeline, so the model sees exactly
 what the server would give it), ``tools.realdata`` (frame time stamps) and ``tools.sim.rules`` (the
-degree of autonomy); never ``models`` or torch.
+degree of autonomy) and ``models.labels`` (numpy only); never torch.
+
+Why not MIT's VISTA (``vista`` 2.0.6 on PyPI, the field's data-driven simulator): its sdist declares no
+dependencies but imports pyrender (OpenGL, so EGL or OSMesa on a headless machine) and ffio (an ffmpeg
+reader); a trace must be an H.264 video with CAN, GPS and IMU files and a camera calibration, so every
+Udacity log would first be converted; and its monocular view synthesis is the same ground-plane
+re-projection done here, rendered as a mesh with OpenGL. Here it is a ``cv2.remap`` of each recorded
+JPEG, runs on the deployment packages alone, and reads the logs as the simulator wrote them.
 """

@@ -85,14 +85,3 @@ def advance(s: float, e: float, psi: float, v: float, dt: float, k_car: float, k
     (state: arc length, offset + right, heading error + right)."""
     ds = v * dt * math.cos(psi) / max(0.2, 1.0 - e * k_lane)
     return s + ds, e + v * dt * math.sin(psi), psi + v * dt * k_car - k_lane * ds
-
-
-def heading_change(drive: RecordedDrive, wheelbase_m: float = WHEELBASE_M) -> float:
-    """Total absolute turning of the recorded path, degrees (a lap of a closed track is about 360+)."""
-    return float(np.degrees(np.sum(np.abs(curvature(drive.steering, wheelbase_m) * drive.speed * drive.dt))))
-
-
-def radius_m(steering: float, wheelbase_m: float = WHEELBASE_M) -> float:
-    """Turning radius of a steering value (inf when straight)."""
-    k = float(curvature(steering, wheelbase_m))
-    return math.inf if k == 0 else 1.0 / abs(k)

@@ -21,6 +21,8 @@ def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias
         "steer_bias": bias,
         "eta": round(result.eta, 2),
         "interventions": result.interventions,
+        # eta clamps at 0 once take-overs cost more than the drive lasted; this still tells two drivers apart
+        "seconds_per_takeover": round(result.driving_time_s / max(1, result.interventions), 2),
         "offset_rms_m": round(result.offset_rms_m, 4),
         "offset_max_m": round(float(np.max(np.abs(result.offsets))) if len(result.offsets) else 0.0, 4),
         "heading_rms_deg": round(float(np.sqrt(np.mean(result.headings ** 2))) if len(result.headings) else 0.0, 3),
