@@ -49,9 +49,10 @@ Driver = Callable[[np.ndarray, int], float]
 
 @dataclass(frozen=True)
 class Takeover:
-    step: int  # position in the log (the frame the car had reached)
+    frame: int  # position in the log (the frame the car had reached)
     time_s: float  # driving time since the start
     offset_m: float
+    step: int  # step of the loop (index into ``LoopResult.offsets``)
 
 
 @dataclass(frozen=True)
@@ -137,7 +138,7 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             if fresh or (over and sum(x.takeover for x in shots) < snapshots):
                 shots.append(Snapshot(i, view, offsets[-1], headings[-1], delta, over))
             if over:
-                takeovers.append(Takeover(i, moving_time, e))
+                takeovers.append(Takeover(i, moving_time, e, len(offsets) - 1))
                 e, psi = 0.0, 0.0  # a person puts the car back on the recorded path
             if on_step and i != last:
                 on_step(i)

@@ -63,7 +63,8 @@ def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[in
     for e in (-limit, 0.0, limit):
         draw_text(img, f"{e:+.1f} m", (4, xy(0, e)[1] + 4), px=11, color=(60, 60, 60))
     draw_text(img, title, (left, 18), px=13, color=(30, 30, 30))
-    draw_text(img, f"frame of the log (0 .. {n - 1}); red: take-overs ({result.interventions})", (left, height - 8),
+    draw_text(img, f"step of the loop (0 .. {n - 1}, one per recorded frame interval); red: take-overs "
+                   f"({result.interventions})", (left, height - 8),
               px=11, color=(60, 60, 60))
     _write(path, img)
     return path

@@ -29,7 +29,7 @@ def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias
         "frames": frames,
         "steps": result.frames,
         "driving_time_s": round(result.driving_time_s, 2),
-        "takeovers": [{"frame": t.step, "time_s": round(t.time_s, 2), "offset_m": round(t.offset_m, 3)}
+        "takeovers": [{"frame": t.frame, "time_s": round(t.time_s, 2), "offset_m": round(t.offset_m, 3)}
                       for t in result.takeovers],
         "rules": asdict(result.rules),
         "camera": asdict(camera),
