@@ -32,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="drive_server", description=__doc__.splitlines()[0].split(": ", 1)[1],
                                 formatter_class=DefaultsHelpFormatter)
     p.add_argument("--model", type=Path, default=None,
-                   help="ONNX model (default: the bundled models/pretrained/generalist_pilotnet.onnx)")
+                   help="ONNX model (default: the bundled models/pretrained/unity.onnx, trained on real Unity frames)")
     server = ServerConfig  # the defaults, defined once
     p.add_argument("--host", default=server.host,
                    help="interface to listen on (default: localhost only; IPv6 such as ::1 works; another "

@@ -8,14 +8,22 @@ from pathlib import Path
 from protocol.facts import BEHAVIORS
 
 PRETRAINED_PACKAGE = "models.pretrained"
-#: What drive_server and rbc demo serve without --model: the generalist, which matches the specialists on
-#: their home tracks (README "Generalisation") and also drives roads it never saw.
-DEFAULT_MODEL_NAME = "generalist_pilotnet.onnx"
+#: What drive_server serves without --model: the model trained on public recordings of the real Unity
+#: simulator by many drivers (all three tracks), because a user beside Unity runs exactly that.
+DEFAULT_MODEL_NAME = "unity.onnx"
+#: What rbc demo (and the headless experiments' default driver) serves: the generalist of the headless
+#: simulator, which matches the specialists on their home tracks and drives roads it never saw.
+DEMO_MODEL_NAME = "generalist_pilotnet.onnx"
 
 
 def default_model_path() -> Path:
-    """Path of the default bundled model (it may not exist yet: the caller checks)."""
+    """Path of drive_server's default model (it may not exist yet: the caller checks)."""
     return Path(str(resources.files(PRETRAINED_PACKAGE) / DEFAULT_MODEL_NAME))
+
+
+def demo_model_path() -> Path:
+    """Path of the model ``rbc demo`` drives the headless simulator with."""
+    return Path(str(resources.files(PRETRAINED_PACKAGE) / DEMO_MODEL_NAME))
 
 
 def bundled_model_path(behavior: str = "simplistic") -> Path:

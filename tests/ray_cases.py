@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from drive_server.models_dir import default_model_path
+from drive_server.models_dir import demo_model_path
 from tests.conftest import write_stadium
 from tools.evaluate.runner import DriverSpec, Runner, Task, record_key, run_task
 from tools.evaluate.suite import SuiteConfig, run_suite
@@ -42,7 +42,7 @@ def killed_worker(folder: Path) -> dict:
 
     track = write_stadium(folder, straight=40.0, radius=20.0)
     cfg = SuiteConfig(track=track, experiments=("no_variation", "position"), seeds=2)
-    spec = DriverSpec(model=str(default_model_path()))
+    spec = DriverSpec(model=str(demo_model_path()))
     local = Runner(spec, 2, folder / "pool.jsonl")
     try:
         local_summary = run_suite(cfg, local, 2)

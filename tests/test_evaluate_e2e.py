@@ -44,10 +44,10 @@ WORLDS_CONFIG = '{"min_length_m": 200, "max_length_m": 400, "drive_check": false
 
 def test_unseen_worlds_over_the_socket_two_tiny_worlds(tmp_path):
     """The experiment beyond the paper: two generated evaluation worlds, the bundled model on the real server."""
-    from drive_server.models_dir import default_model_path
+    from drive_server.models_dir import demo_model_path
 
     out = tmp_path / "eval"
-    with ServerProcess(default_model_path(), ["--log-every", "0"]) as server:
+    with ServerProcess(demo_model_path(), ["--log-every", "0"]) as server:
         proc = subprocess.run(
             [sys.executable, "-m", "tools.cli", "eval", "--server", server.url, "--experiments", "unseen_worlds",
              "--worlds", "2", "--world-config", WORLDS_CONFIG, "--workers", "2", "--out", str(out)],

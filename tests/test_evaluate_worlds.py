@@ -88,13 +88,13 @@ def test_worlds_come_from_the_evaluation_range_and_are_recorded(tmp_path):
 
 def test_the_world_document_travels_with_the_task(tmp_path):
     """A worker without the track file (a Ray node elsewhere) writes it where the run expects it."""
-    from drive_server.models_dir import default_model_path
+    from drive_server.models_dir import demo_model_path
 
     path = write_eval_worlds(tmp_path, [1_000_001], SHORT, resume=False)["files"][1_000_001]
     doc = json.loads(Path(path).read_text())
     elsewhere = tmp_path / "node" / "worlds" / "world-1000001.json"
     scenario = {"track": str(elsewhere), "seed": 0, "laps": 1, "speed_limit_kmh": 30.0, "spawn_noise": True}
-    rec = run_task(DriverSpec(model=str(default_model_path())), Task("unseen_worlds", "simplistic", 1_000_001, 0,
+    rec = run_task(DriverSpec(model=str(demo_model_path())), Task("unseen_worlds", "simplistic", 1_000_001, 0,
                                                                      scenario, track_doc=doc))
     assert json.loads(elsewhere.read_text()) == doc and rec["config"]["track"] == str(elsewhere)
     assert rec["value"] == 1_000_001 and rec["laps"]

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from drive_server.models_dir import default_model_path
+from drive_server.models_dir import demo_model_path
 from tests.conftest import write_stadium
 from tools.evaluate.runner import read_journal
 
@@ -47,7 +47,7 @@ def _interrupt(cmd, journal) -> tuple[list[dict], str]:
 
 def test_interrupted_eval_resumes_to_the_uninterrupted_table(tmp_path):
     """The bundled model drives this stadium, so the orientation range search runs ~16 runs of ~1 s."""
-    model = default_model_path()
+    model = demo_model_path()
     track = write_stadium(tmp_path, straight=60.0, radius=30.0, road_width=10.0)
     reference = subprocess.run(_cmd(model, track, tmp_path / "ref"), capture_output=True, text=True,
                                timeout=300)

@@ -49,7 +49,8 @@ def test_contract_input_takes_nhwc_and_matches_nchw() -> None:
         a = ContractInput(net, "nhwc")(x)
         b = net(x.permute(0, 3, 1, 2).contiguous())
         c = ContractInput(net, "nchw")(x.permute(0, 3, 1, 2))
-    assert torch.equal(a, b) and torch.equal(b, c)
+    # the same numbers up to float rounding: oneDNN may pick another kernel for a channels-last input
+    assert torch.allclose(a, b, atol=1e-6) and torch.allclose(b, c, atol=1e-6)
 
 
 @pytest.mark.parametrize("name", ["shallow", "pilotnet"])

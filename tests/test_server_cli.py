@@ -76,16 +76,16 @@ def test_bad_options_exit_2(tmp_path, args, words):
 def test_missing_default_model_is_a_clear_error(monkeypatch, capsys, tmp_path):
     from drive_server import cli
 
-    monkeypatch.setattr(cli, "default_model_path", lambda: tmp_path / "generalist_pilotnet.onnx")
+    monkeypatch.setattr(cli, "default_model_path", lambda: tmp_path / "unity.onnx")
     assert cli.main(["--port", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("drive_server: error: no --model")
-    assert "generalist_pilotnet.onnx" in err[0]
+    assert "unity.onnx" in err[0]
 
 
 def test_default_model_path_is_the_bundled_package_file():
     path = default_model_path()
-    assert path.name == "generalist_pilotnet.onnx" and path.parent == REPO / "models" / "pretrained"
+    assert path.name == "unity.onnx" and path.parent == REPO / "models" / "pretrained"
 
 
 def test_port_in_use_exits_2(tmp_path):

@@ -48,7 +48,7 @@ def _server_latency(stats_path: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.models_dir import bundled_model_path, default_model_path
+    from drive_server.models_dir import bundled_model_path, demo_model_path
     from drive_server.runrecords import write_json
     from tools.console import Progress
     from tools.sim.drivers import SocketDriver
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from tools.sim.viz import StripCollector, write_trajectory_map
     from tools.wire.server_process import ServerProcess, ServerStartError
 
-    model = args.model or (bundled_model_path(args.behavior) if args.behavior else default_model_path())
+    model = args.model or (bundled_model_path(args.behavior) if args.behavior else demo_model_path())
     if not model.is_file():
         raise CommandError(f"model not found: {model}", "pass --model PATH to an .onnx file")
     out: Path = args.out
