@@ -21,5 +21,14 @@ def steering_metrics(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
             "r": pearson_r(p, t), "zero_mse": float(np.mean(t ** 2)) if len(t) else float("nan")}
 
 
+def metrics_by_group(pred: np.ndarray, truth: np.ndarray, groups: np.ndarray) -> dict[int, dict[str, float]]:
+    """:func:`steering_metrics` of each group (e.g. each held-out recording), plus ``beats_zero``."""
+    out = {}
+    for g in np.unique(groups):
+        m = steering_metrics(np.asarray(pred)[groups == g], np.asarray(truth)[groups == g])
+        out[int(g)] = {**m, "beats_zero": m["mse"] < m["zero_mse"]}
+    return out
+
+
 def format_metrics(m: dict[str, float]) -> str:
     return f"MSE {m['mse']:.4f}, Pearson r {m['r']:.2f}, always-0 MSE {m['zero_mse']:.4f} ({m['n']} frames)"

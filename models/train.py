@@ -33,7 +33,7 @@ from models.behavior import Pipeline
 from models.checkpoint import RunDirError, State, load_checkpoint, save_checkpoint
 from models.export import export_onnx
 from models.fastaug import FastAugmenter, training_contract
-from models.metrics import steering_metrics
+from models.metrics import metrics_by_group, steering_metrics
 from models.nets import build_model, count_parameters
 from models.train_config import TrainConfig
 from models.train_record import config_record
@@ -227,7 +227,8 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
         exported_epoch = state.best_epoch
     predicted = predict(model, data, pipeline, data.val, config.batch_size)
     metrics = steering_metrics(predicted, data.steering[data.val])
-    by_recording = per_recording_metrics(data, predicted)
+    by_recording = [{"log": str(data.dataset.reports[g].log), **m} for g, m in
+                    metrics_by_group(predicted, data.steering[data.val], data.recording_groups(data.val)).items()]
     val_loss = state.history[exported_epoch - 1]["val_loss"] if state.history else float("nan")
     info = {"arch": config.arch, "behavior": config.behavior, "approach": config.approach, "val_mse": val_loss,
             "epochs": len(state.history), "train_samples": int(len(data.train)), "seed": config.seed,
@@ -245,17 +246,6 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
     return TrainResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate,
                        info={**info, "metrics": metrics, "summary": data.summary(config.data_options()),
                              "val_by_recording": by_recording})
-
-
-def per_recording_metrics(data: PreparedData, predicted: np.ndarray) -> list[dict[str, Any]]:
-    """Held-out MSE, r and always-0 MSE of each recording that has validation frames (log order)."""
-    groups = data.recording_groups(data.val)
-    out = []
-    for g in np.unique(groups):
-        mine = groups == g
-        m = steering_metrics(predicted[mine], data.steering[data.val][mine])
-        out.append({"log": str(data.dataset.reports[int(g)].log), **m, "beats_zero": m["mse"] < m["zero_mse"]})
-    return out
 
 
 def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
