@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,19 +19,33 @@ from tools.sim.world import Pose, World, get_world
 
 # sha256 prefixes of 24 frames per track (12 poses around the lap: centre camera; left camera dimmed and
 # bumped), computed on the commit before format version 2 (bc6a0cd); they must never change.
-V1_FRAME_HASHES = {"lake": "ef1a1e15d17bd132", "mountain": "cfb2652881c47f95",
-                   "stadium1": "a3f1f80ca1d5e74e", "stadium2": "9eaaf243eb3e4d65"}
+V1_FRAME_HASHES = {"lake": "ef1a1e15d17bd132", "mountain": "cfb2652881c47f95"}
+# The test stadiums' same 24 frames as 8x8-block sums (tests/data/stadium_v1_thumbs.npz, written from the
+# frames that matched bc6a0cd's hashes). Not hashes: their curves meet pixel boundaries where numpy's
+# CPU-dispatched sin/cos differ in the last bit, so CI machines differ by a few edge pixels; a change in
+# what is drawn moves the block sums by far more (road 8.1 m wide instead of 8: mean 0.55 grey levels).
+STADIUM_THUMBS = Path(__file__).parent / "data" / "stadium_v1_thumbs.npz"
 
 
-def frames_hash(track: Track) -> str:
+def v1_frames(track: Track):
     r = Renderer(get_world(track))
-    h = hashlib.sha256()
     for s in np.linspace(0, track.length, 12, endpoint=False):
         x, y, hd = track.point_at(s)
         p = Pose(x, y, hd)
-        h.update(r.render(p, "center").tobytes())
-        h.update(r.render(p, "left", light_intensity=0.6, pitch_deg=0.5, roll_deg=-0.4).tobytes())
+        yield r.render(p, "center")
+        yield r.render(p, "left", light_intensity=0.6, pitch_deg=0.5, roll_deg=-0.4)
+
+
+def frames_hash(track: Track) -> str:
+    h = hashlib.sha256()
+    for frame in v1_frames(track):
+        h.update(frame.tobytes())
     return h.hexdigest()[:16]
+
+
+def thumbs(track: Track) -> np.ndarray:
+    """Each frame as 8x8-block sums (20 x 40 x 3; exact in uint16)."""
+    return np.stack([f.reshape(20, 8, 40, 8, 3).sum(axis=(1, 3), dtype=np.uint16) for f in v1_frames(track)])
 
 
 @pytest.mark.parametrize("name", ["lake", "mountain"])
@@ -41,8 +56,11 @@ def test_builtin_version1_tracks_render_byte_identically(name):
 
 
 @pytest.mark.parametrize("lanes", [1, 2])
-def test_test_stadiums_render_byte_identically(lanes, tmp_path):
-    assert frames_hash(load_track(write_stadium(tmp_path, lanes=lanes))) == V1_FRAME_HASHES[f"stadium{lanes}"]
+def test_test_stadiums_render_as_before(lanes, tmp_path):
+    expected = np.load(STADIUM_THUMBS)[f"stadium{lanes}"].astype(float) / 64
+    got = thumbs(load_track(write_stadium(tmp_path, lanes=lanes))) / 64
+    diff = np.abs(got - expected)  # grey levels, per block
+    assert diff.mean() < 0.05 and diff.max() < 40, (diff.mean(), diff.max())
 
 
 def ring(**extra) -> dict:
