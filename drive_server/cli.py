@@ -75,9 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
     limits = WireLimits  # the defaults, defined once
     p.add_argument("--max-connections", type=int, default=limits.max_connections,
                    help="open connections at most; then the oldest one still sending its headers is closed, "
-                        "or the new one refused (default %(default)s)")
+                        "else the WebSocket silent longest (past --idle-evict), else the new one is refused "
+                        "(default %(default)s)")
     p.add_argument("--header-timeout", type=float, default=limits.header_timeout_s,
                    help="seconds a connection has to send its request headers (default %(default)s)")
+    p.add_argument("--idle-evict", type=float, default=limits.idle_evict_s, metavar="S",
+                   help="at the connection cap, a WebSocket that has sent nothing for S seconds gives its slot "
+                        "to a new client (default %(default)s)")
     p.add_argument("--max-pending", type=int, default=limits.max_pending_replies,
                    help="replies queued for a client that does not read them before it is disconnected "
                         "(default %(default)s)")
@@ -132,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         if not 0 <= args.port <= 65535:
             raise ValueError(f"--port must be in 0..65535, got {args.port}")
         WireLimits(max_connections=args.max_connections, header_timeout_s=args.header_timeout,
-                   max_pending_replies=args.max_pending)
+                   max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict)
     except ValueError as exc:
         return fail(str(exc))
     model_path = args.model
@@ -164,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
     config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
                           fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval,
                           max_connections=args.max_connections, header_timeout_s=args.header_timeout,
-                          max_pending_replies=args.max_pending, dashboard=_dashboard_wanted(args, sock))
+                          max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict,
+                          dashboard=_dashboard_wanted(args, sock))
     log.info("model %s", model.describe())
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s",
              drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value)

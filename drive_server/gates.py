@@ -16,6 +16,7 @@ import struct
 import sys
 from collections import OrderedDict
 from collections.abc import Callable
+from time import monotonic
 from typing import Any
 from urllib.parse import parse_qs
 
@@ -60,8 +61,9 @@ def limited_message_class(base: type, limit: int, on_too_large: Callable[[int], 
     return LimitedMessage
 
 
-def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str) -> None:
-    """Apply the per-connection limits to one eventlet ``RFC6455WebSocket`` (instance attributes only)."""
+def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str, heard: list[float]) -> None:
+    """Apply the per-connection limits to one eventlet ``RFC6455WebSocket`` (instance attributes only);
+    ``heard[0]`` becomes the time of its latest message (what the connection cap's idle eviction reads)."""
     ws.Message = limited_message_class(
         type(ws).Message, limits.max_message_bytes,
         lambda size: faults.report("message_too_large", "%s: WebSocket message of %d+ bytes (limit %d): closed",
@@ -77,6 +79,7 @@ def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str) ->
         data = stock_wait()
         if data is None:
             return None
+        heard[0] = monotonic()
         problem = packet_problem(data)
         if problem is not None:
             faults.report("protocol_error", "%s: protocol error (%s): connection closed", peer, problem)
@@ -102,21 +105,33 @@ def websocket_gate_supported() -> tuple[bool, str]:
     return True, ""
 
 
-def limited_websocket_class(base: type, limits: WireLimits, faults: FaultLog) -> type:
-    """A subclass of engine.io's eventlet ``WebSocketWSGI`` that guards every connection it upgrades."""
+def limited_websocket_class(base: type, limiter: ConnectionLimiter) -> type:
+    """A subclass of engine.io's eventlet ``WebSocketWSGI`` that guards every connection it upgrades and
+    tells ``limiter`` when each last sent something."""
     from eventlet.websocket import RFC6455WebSocket
 
+    limits, faults = limiter.limits, limiter.faults
     ok, why = websocket_gate_supported()
     if not ok:
         log.warning("WebSocket messages bounded only after reassembly (%s)", why)
 
     class LimitedWebSocketWSGI(base):  # type: ignore[misc, valid-type]
+        def __call__(self, environ: dict[str, Any], start_response: Callable) -> Any:
+            try:
+                return super().__call__(environ, start_response)  # the whole WebSocket session
+            finally:
+                ws = environ.get("rbc.websocket")
+                if ws is not None:
+                    limiter.upgraded.pop(id(ws), None)
+
         def _handle_hybi_request(self, environ: dict[str, Any]) -> Any:
             ws = super()._handle_hybi_request(environ)
             if isinstance(ws, RFC6455WebSocket):
                 peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
+                heard = [monotonic()]  # the upgrade counts as hearing from it
+                limiter.upgraded[id(ws)] = (ws.socket, heard)
                 if ok:
-                    guard_websocket(ws, limits, faults, peer)
+                    guard_websocket(ws, limits, faults, peer, heard)
                 environ["rbc.websocket"] = ws  # lets the server close this connection with a close frame
             return ws
 
@@ -194,28 +209,47 @@ def polling_gate(app: Callable, eio_server: Any, limits: WireLimits, faults: Fau
 
 
 class ConnectionLimiter:
-    """Counts the open connections and remembers which of them are still sending their headers."""
+    """Counts the open connections and remembers which are still sending their headers and when each
+    upgraded WebSocket last sent something."""
 
     def __init__(self, limits: WireLimits, faults: FaultLog) -> None:
         self.limits = limits
         self.faults = faults
         self.open = 0
         self.waiting: OrderedDict[int, Any] = OrderedDict()  # id(protocol) -> socket, oldest first
+        self.upgraded: dict[int, tuple[Any, list[float]]] = {}  # id(websocket) -> (socket, [last message time])
 
     def admit(self, peer: str) -> bool:
-        """Whether a new connection may be served; at the cap, the oldest connection still sending its
-        headers is closed to make room (its own greenthread then ends and gives its slot back)."""
+        """Whether a new connection may be served. At the cap, the oldest connection still sending its
+        headers is closed to make room, else the WebSocket silent longest if it has been silent for
+        ``idle_evict_s`` (its own greenthread then ends and gives its slot back)."""
         if self.open >= self.limits.max_connections:
-            if not self.waiting:
-                self.faults.report("refused", "connection limit (%d, --max-connections) reached: refused %s",
-                                   self.limits.max_connections, peer)
-                return False
-            _, sock = self.waiting.popitem(last=False)
-            self.faults.report("evicted", "connection limit (%d) reached: closed the oldest connection still "
-                               "sending its headers to admit %s", self.limits.max_connections, peer)
+            if self.waiting:
+                _, sock = self.waiting.popitem(last=False)
+                self.faults.report("evicted", "connection limit (%d) reached: closed the oldest connection still "
+                                   "sending its headers to admit %s", self.limits.max_connections, peer)
+            else:
+                sock, silent_s = self._idlest()
+                if sock is None:
+                    self.faults.report("refused", "connection limit (%d, --max-connections) reached: refused %s",
+                                       self.limits.max_connections, peer)
+                    return False
+                self.faults.report("evicted", "connection limit (%d) reached: closed a WebSocket silent for "
+                                   "%.0f s (--idle-evict) to admit %s", self.limits.max_connections, silent_s, peer)
             shutdown_socket(sock)  # its blocked read returns EOF
         self.open += 1
         return True
+
+    def _idlest(self) -> tuple[Any, float]:
+        """The socket of the WebSocket silent longest, if past ``idle_evict_s`` (else None), and its silence."""
+        if not self.upgraded:
+            return None, 0.0
+        key, (sock, heard) = min(self.upgraded.items(), key=lambda item: item[1][1][0])
+        silent_s = monotonic() - heard[0]
+        if silent_s < self.limits.idle_evict_s:
+            return None, silent_s
+        del self.upgraded[key]  # evicted once: the next newcomer looks at the next idlest
+        return sock, silent_s
 
 
 def protocol_class(limiter: ConnectionLimiter) -> type:

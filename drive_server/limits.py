@@ -5,8 +5,10 @@ What the libraries leave open, and what this module closes (each item of issue #
 - Connections [8]: eventlet's WSGI server has no header timeout and queues connection 1,025 forever
   behind 1,024 half-open ones. ``protocol_class`` gives every connection ``header_timeout_s`` to send
   its request line and headers, caps the number of connections, and when the cap is reached closes the
-  oldest connection still sending its headers (a half-open flood cannot keep clients out) or, if
-  there is none, refuses the new one with a 503 and one log line.
+  oldest connection still sending its headers (a half-open flood cannot keep clients out), else the
+  upgraded WebSocket silent longest if it has sent nothing for ``idle_evict_s`` (an idle socket would
+  otherwise hold its slot until the ping timeout, 45 s: a burst of them filled the cap), or, if there
+  is neither, refuses the new one with a 503 and one log line.
 - Long-polling bodies [1]: engine.io answers an oversized POST by closing the session with
   ``wait=True``, which waits forever for a poll the client never sends (greenthread and socket kept,
   CLOSE_WAIT). ``polling_gate`` answers 413 from the Content-Length alone, before reading the body,
@@ -60,12 +62,16 @@ CLOSE_PROTOCOL_ERROR = 1002
 
 @dataclass(frozen=True)
 class WireLimits:
-    """Limits of one server (``--max-connections``, ``--header-timeout``, ``--max-pending``, message size)."""
+    """Limits of one server (``--max-connections``, ``--header-timeout``, ``--idle-evict``, ``--max-pending``,
+    message size)."""
 
     max_message_bytes: int = 256 * 1024
     max_connections: int = 256
     header_timeout_s: float = 10.0
     max_pending_replies: int = 64
+    #: Seconds an upgraded WebSocket may stay silent before, at the cap, it gives its slot to a new client.
+    #: A simulator sends 10-30 telemetries a second and pings every 25 s; 5 s is far from both.
+    idle_evict_s: float = 5.0
 
     def __post_init__(self) -> None:
         if self.max_message_bytes < 1024:
@@ -74,6 +80,8 @@ class WireLimits:
             raise ValueError(f"--max-connections must be >= 1, got {self.max_connections}")
         if not self.header_timeout_s > 0:
             raise ValueError(f"--header-timeout must be > 0 s, got {self.header_timeout_s}")
+        if not self.idle_evict_s > 0:
+            raise ValueError(f"--idle-evict must be > 0 s, got {self.idle_evict_s}")
         if self.max_pending_replies < 2:  # the simulator keeps two frames in flight
             raise ValueError(f"--max-pending must be >= 2, got {self.max_pending_replies}")
 

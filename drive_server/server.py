@@ -81,7 +81,8 @@ class DriveServer:
         self.session_log = FaultLog(None, SESSION_LOG_INTERVAL_S, logging.INFO, SESSION_LOG_BURST, log)
         eio = self.sio.eio
         eio._async = dict(eio._async)  # our own copy of the driver table (the module-level one stays stock)
-        eio._async["websocket"] = limited_websocket_class(eio._async["websocket"], self.limits, self.fault_log)
+        self.limiter = ConnectionLimiter(self.limits, self.fault_log)  # the cap, shared with the upgraded sockets
+        eio._async["websocket"] = limited_websocket_class(eio._async["websocket"], self.limiter)
         self.sio.on_bad_telemetry = self._on_bad_telemetry
         self.sio.on_protocol_error = self._on_protocol_error
         self.clients: dict[str, ClientState] = {}
@@ -270,7 +271,7 @@ class DriveServer:
         if self._sock is None:
             self.bind()
         sock = self._sock
-        limiter = ConnectionLimiter(self.limits, self.fault_log)
+        limiter = self.limiter
         server = eventlet.spawn(eventlet.wsgi.server, sock, self.app, log_output=False, debug=False,
                                 log=logging.getLogger("eventlet.wsgi"), protocol=protocol_class(limiter),
                                 max_size=self.limits.max_connections + SPARE_SLOTS)

@@ -37,12 +37,14 @@ class ServerConfig:
     max_connections: int = WireLimits.max_connections  # open TCP connections (a simulator holds one)
     header_timeout_s: float = WireLimits.header_timeout_s  # to send the request line and headers (and a poll body)
     max_pending_replies: int = WireLimits.max_pending_replies  # queued replies of a client that does not read
+    idle_evict_s: float = WireLimits.idle_evict_s  # silence after which, at the cap, a WebSocket gives way
     dashboard: bool = False  # the read-only live view at http://HOST:PORT/ (drive_server.dashboard)
 
     @property
     def limits(self) -> WireLimits:
         return WireLimits(max_message_bytes=self.max_message_bytes, max_connections=self.max_connections,
-                          header_timeout_s=self.header_timeout_s, max_pending_replies=self.max_pending_replies)
+                          header_timeout_s=self.header_timeout_s, max_pending_replies=self.max_pending_replies,
+                          idle_evict_s=self.idle_evict_s)
 
 
 def stats_document(model: SteeringModel, transport: TransportTuning, stats: list[LatencyStats],

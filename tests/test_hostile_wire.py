@@ -224,6 +224,38 @@ def test_half_open_connections_cannot_keep_clients_out(small_server):
             s.close()
 
 
+@pytest.mark.parametrize("small_server", [["--max-connections", "3", "--idle-evict", "1"]], indirect=True)
+def test_idle_websockets_give_their_slots_to_a_new_simulator(small_server):
+    """Issue 25: an upgraded WebSocket that sends nothing held its slot until the ping timeout (45 s),
+    so a burst of idle sockets kept every new simulator out (503) although none of them was driving."""
+    idle = [UnityWireClient(small_server.url) for _ in range(3)]
+    try:
+        for c in idle:
+            c.connect()  # upgraded, and then silent
+        with pytest.raises(ConnectionError, match="503"):  # not silent long enough yet: refused
+            UnityWireClient(small_server.url).connect()
+        time.sleep(1.3)
+        with UnityWireClient(small_server.url) as newcomer:  # the idlest gives way
+            assert isinstance(newcomer.exchange(GOOD)[0], SteerCommand)
+            wait_for_log(small_server, "closed a WebSocket silent for 1 s (--idle-evict)")
+            close_code(idle[0], timeout=5)  # the first to fall silent is the one closed (raises if open)
+            assert isinstance(newcomer.exchange(GOOD)[0], SteerCommand)
+    finally:
+        for c in idle:
+            c.close()
+
+
+@pytest.mark.parametrize("small_server", [["--max-connections", "2", "--idle-evict", "1"]], indirect=True)
+def test_a_websocket_that_keeps_driving_is_never_evicted(small_server):
+    with UnityWireClient(small_server.url) as a, UnityWireClient(small_server.url) as b:
+        for _ in range(8):  # both drive for 1.6 s, past the idle limit
+            assert isinstance(a.exchange(GOOD)[0], SteerCommand) and isinstance(b.exchange(GOOD)[0], SteerCommand)
+            time.sleep(0.2)
+        with pytest.raises(ConnectionError, match="503"):
+            UnityWireClient(small_server.url).connect()
+        assert isinstance(a.exchange(GOOD)[0], SteerCommand) and isinstance(b.exchange(GOOD)[0], SteerCommand)
+
+
 @pytest.mark.parametrize("small_server", [["--max-connections", "8", "--header-timeout", "1"]], indirect=True)
 def test_a_connection_that_sends_no_headers_is_closed_after_the_header_timeout(small_server):
     host, port = host_port(small_server)
