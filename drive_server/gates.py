@@ -218,6 +218,7 @@ class ConnectionLimiter:
         self.open = 0
         self.waiting: OrderedDict[int, Any] = OrderedDict()  # id(protocol) -> socket, oldest first
         self.upgraded: dict[int, tuple[Any, list[float]]] = {}  # id(websocket) -> (socket, [last message time])
+        self.ended = 0  # connections ended so far (the server collects their garbage when it is quiet)
 
     def admit(self, peer: str) -> bool:
         """Whether a new connection may be served. At the cap, the oldest connection still sending its
@@ -276,6 +277,7 @@ def protocol_class(limiter: ConnectionLimiter) -> type:
             finally:
                 limiter.waiting.pop(id(self), None)
                 limiter.open -= 1
+                limiter.ended += 1
 
         def handle_one_request(self) -> None:
             """One request; the request line and headers must arrive within ``header_timeout_s`` (an idle

@@ -285,9 +285,17 @@ class DriveServer:
             log.info("listening on %s", listen.url(sock))
             if self.dashboard is not None:
                 log.info("live view (read-only) at %s/", listen.url(sock))
+        collected_upto = 0
         try:
             while not self._stop and not server.dead:
                 eventlet.sleep(0.2)  # a signal only sets a flag; this loop notices it
+                if limiter.ended != collected_upto and not self.clients:
+                    # A connection that ended on an error (a live-view viewer gone: EPIPE) leaves its socket
+                    # in a reference cycle through the traceback, and only the collector closes its fd. With
+                    # simulators connected, their traffic runs the collector; a quiet server would keep such
+                    # fds until the next telemetry (rbc soak saw one per viewer). Cheap: gc.freeze() above.
+                    collected_upto = limiter.ended
+                    gc.collect()
         finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)

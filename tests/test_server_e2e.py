@@ -270,3 +270,27 @@ def test_worker_processes_share_the_port(model, tmp_path):
     assert stats["workers"] == 2
     assert (stats["total"]["frames"], stats["total"]["malformed"], stats["total"]["manual"]) == (13, 1, 1)
     assert len(stats["clients"]) == 5
+
+
+def test_a_live_view_viewer_that_leaves_gives_its_file_descriptor_back(model):
+    """Found by rbc soak: a viewer gone (EPIPE) left its socket in a reference cycle, and a quiet server kept
+    its fd open until the next telemetry ran the garbage collector."""
+    import os
+    import socket
+
+    with ServerProcess(model, ["--log-every", "0", "--dashboard"]) as srv:
+        fds = lambda: len(os.listdir(f"/proc/{srv.pid}/fd"))  # noqa: E731
+        with UnityWireClient(srv.url) as c:  # the server as after a drive: warmed up, then quiet
+            c.exchange(GOOD)
+        time.sleep(0.5)
+        before = fds()
+        host, port = srv.url.removeprefix("http://").split(":")
+        for _ in range(3):
+            viewer = socket.create_connection((host, int(port)), timeout=10)
+            viewer.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert viewer.recv(64).startswith(b"HTTP/1.1 200")
+            viewer.close()
+        deadline = time.monotonic() + 8
+        while fds() > before and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert fds() == before

@@ -51,6 +51,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "a browser-playable video of a recording (drive_server --record, rbc collect, Unity)"),
     Subcommand("fuzz", "tools.commands.fuzz",
                "hostile-client campaign against drive_server; healthy latency beside it"),
+    Subcommand("soak", "tools.commands.soak",
+               "drive_server for hours under a steady mix of clients: what leaked or drifted (JSON, plot)"),
     Subcommand("replay", "tools.commands.replay",
                "replay a driving log to a drive server as the Unity simulator would"),
     Subcommand("score", "tools.commands.score",

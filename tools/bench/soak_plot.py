@@ -1,0 +1,51 @@
+"""The picture of a soak: the server's RSS and open fds, and the round trip p50/p99, over time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+
+def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
+    """Three stacked panels over minutes of the run; None when matplotlib (extra ``plots``) is missing."""
+    try:
+        import matplotlib
+    except ImportError:
+        return None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    samples = result["samples"]
+    t = [s["t_s"] / 60 for s in samples]
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
+    rss = axes[0]
+    rss.plot(t, [s["rss_mib"] for s in samples], color="tab:blue")
+    rss.set_ylabel("server RSS (MiB)")
+    if result.get("rss_mib_start") is not None:
+        rss.axhline(result["rss_mib_start"] + 20, color="tab:red", ls=":", lw=1, label="start + 20 MiB")
+        rss.legend(loc="lower right", fontsize=8)
+    axes[1].plot(t, [s["fds"] for s in samples], color="tab:green")
+    axes[1].set_ylabel("open fds")
+    if result.get("fds_start") is not None:
+        axes[1].axhline(result["fds_start"], color="grey", ls=":", lw=1, label="before the clients")
+        axes[1].legend(loc="lower right", fontsize=8)
+    lat = axes[2]
+    lat.plot(t, [s["p50_ms"] for s in samples], label="p50", color="tab:purple")
+    lat.plot(t, [s["p99_ms"] for s in samples], label="p99", color="tab:orange")
+    lat.set_ylabel("round trip (ms)")
+    lat.set_xlabel("minutes")
+    lat.set_ylim(bottom=0)
+    lat.legend(loc="upper right", fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    rates = result.get("rates_hz", [])
+    fig.suptitle(f"rbc soak: {result['clients']} simulators at {rates[0]:g}-{rates[-1]:g} Hz, a reconnect loop, "
+                 f"an idle socket, malformed frames, live view, recording; {result['telemetries']:,} telemetries, "
+                 f"{result['unanswered']} unanswered, {result['double_answered']} answered twice", fontsize=9)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
