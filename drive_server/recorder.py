@@ -107,10 +107,15 @@ class Recorder:
         self._last_ms = ms
         name = frame_name("center", dt.datetime.fromtimestamp(ms / 1000))
         path = self._images / name
-        path.write_bytes(base64.b64decode(image_b64, validate=True))
+        data = base64.b64decode(image_b64, validate=True)
         assert self._writer is not None
-        # the log's columns as the simulator writes them: throttle 0..1 and brake 0..1, from the sent -1..1
-        self._writer.write([str(path)], steering, max(0.0, throttle), max(0.0, -throttle), speed)
+        try:
+            path.write_bytes(data)
+            # the log's columns as the simulator writes them: throttle 0..1 and brake 0..1, from the sent -1..1
+            self._writer.write([str(path)], steering, max(0.0, throttle), max(0.0, -throttle), speed)
+        except OSError:
+            path.unlink(missing_ok=True)  # a full disk: no row, and no cut-off image without one
+            raise
         self.counts.recorded += 1
 
     def _warn(self, exc: BaseException) -> None:

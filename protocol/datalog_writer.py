@@ -2,7 +2,8 @@
 
 ``driving_log.csv``: no header, ``", "`` separators, absolute image paths, numbers as C# prints them
 (``0``, ``-0.2095149``, ``7.843922E-05``); frames in ``IMG/{camera}_YYYY_MM_DD_HH_MM_SS_mmm.jpg``.
-Each row is one ``write`` followed by a flush, so an interrupted recorder never leaves half a row.
+Each row is one ``write`` straight to the file, so an interrupted recorder never leaves half a row, and a
+write the disk cannot take (full: ENOSPC) is cut back to the last whole row before the error goes on.
 Stdlib only.
 """
 
@@ -10,10 +11,11 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
+import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TextIO
 
+from protocol.appending import append_whole
 from protocol.datalog import COLUMNS, positional_columns
 from protocol.facts import CAMERAS
 
@@ -77,20 +79,21 @@ def last_row_stamp(log_path: Path) -> dt.datetime | None:
 
 
 class LogWriter:
-    """Appends rows to a log, one ``write`` + flush per row (see the module docstring)."""
+    """Appends rows to a log, one unbuffered ``write`` per row (see the module docstring)."""
 
     def __init__(self, log_path: Path) -> None:
         self.path = Path(log_path)
-        self._fh: TextIO = self.path.open("a", encoding="utf-8", newline="")
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
         self.rows = 0
 
     def write(self, images: Sequence[str], steering: float, throttle: float, brake: float, speed: float) -> None:
-        self._fh.write(format_row(images, steering, throttle, brake, speed) + "\n")
-        self._fh.flush()
+        append_whole(self._fd, (format_row(images, steering, throttle, brake, speed) + "\n").encode("utf-8"))
         self.rows += 1
 
     def close(self) -> None:
-        self._fh.close()
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
 
     def __enter__(self) -> LogWriter:
         return self

@@ -9,7 +9,7 @@ import cv2
 import pytest
 from test_rules import stadium  # the small test tracks live with the rules tests
 
-from tools.sim.collect import CollectConfig, OutputDirError, collect
+from tools.sim.collect.dataset import CollectConfig, OutputDirError, collect
 
 NAME = re.compile(r"^(center|left|right)_\d{4}_\d{2}_\d{2}_\d{2}_\d{2}_\d{2}_\d{3}\.jpg$")
 

@@ -14,9 +14,9 @@ import pytest
 from drive_server.runrecords import file_sha256
 from protocol.datalog import read_log
 from tools.cli import main
-from tools.sim.collect import CollectConfig
-from tools.sim.collect_worlds import WorldsConfig, collect_worlds, world_collect_seed, world_light_intensity
-from tools.sim.track_file import load_track
+from tools.sim.collect.dataset import CollectConfig
+from tools.sim.collect.worlds import WorldsConfig, collect_worlds, world_collect_seed, world_light_intensity
+from tools.sim.track.files import load_track
 from tools.sim.worldgen import WorldGenConfig
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -93,7 +93,7 @@ def test_the_number_of_viewers_is_bounded():
 def test_the_watch_pacer_keeps_simulated_time_at_the_wall_clocks_pace():
     from types import SimpleNamespace
 
-    from tools.sim.pacing import WallClockPacer
+    from tools.sim.driving.pacing import WallClockPacer
 
     wall = [100.0]
     slept: list[float] = []

@@ -104,7 +104,7 @@ def test_plot_points_draw_a_range_from_its_no_variation_run():
 
 def test_the_car_model_reaches_every_run_of_the_suite():
     from tools.evaluate.suite import SuiteConfig, base_scenario
-    from tools.sim.scenario import ScenarioConfig
+    from tools.sim.driving.scenario import ScenarioConfig
 
     assert base_scenario(SuiteConfig())["vehicle"] == ScenarioConfig.vehicle
     scenario = base_scenario(SuiteConfig(vehicle="dynamic"))

@@ -74,6 +74,31 @@ def test_the_simulator_never_imports_models():
     assert _violations("tools.sim", ("models", "torch")) == []
 
 
+def test_the_simulators_sub_packages_import_only_along_their_arrows():
+    from tools.sim import ALLOWED_IMPORTS
+
+    packages = {p.name for p in (REPO / "tools" / "sim").iterdir() if (p / "__init__.py").exists()}
+    assert packages == set(ALLOWED_IMPORTS), "every sub-package has its arrows in tools.sim.ALLOWED_IMPORTS"
+    wrong = []
+    for name, path in MODULES.items():
+        parts = name.split(".")
+        if parts[:2] != ["tools", "sim"] or len(parts) < 3 or parts[2] not in ALLOWED_IMPORTS:
+            continue
+        for imp in _imports(path):
+            target = imp.split(".")
+            outside = target[:2] == ["tools", "sim"] and len(target) > 2 and target[2] != parts[2]
+            if outside and target[2] not in ALLOWED_IMPORTS[parts[2]]:
+                wrong.append(f"{name} imports {imp}")
+    assert wrong == []
+
+
+def test_no_module_sits_loose_in_the_simulator_and_no_room_is_crowded():
+    sim = REPO / "tools" / "sim"
+    assert sorted(p.name for p in sim.glob("*.py")) == ["__init__.py"]
+    for package in (p for p in sim.iterdir() if (p / "__init__.py").exists()):
+        assert len([m for m in package.glob("*.py") if m.name != "__init__.py"]) <= 15, package.name
+
+
 def test_models_never_import_tools():
     assert _violations("models", ("tools",)) == []
 

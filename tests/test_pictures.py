@@ -8,11 +8,11 @@ import pytest
 from protocol import SteerCommand
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 from tools.evaluate.experiments import EXPERIMENTS
-from tools.sim.rules import Cause, Intervention
-from tools.sim.scenario import FrameEvent
-from tools.sim.text import draw_text, text_size
-from tools.sim.vehicle import VehicleState
-from tools.sim.viz import TAKEOVER_MARK_S, StripCollector, annotate
+from tools.sim.driving.rules import Cause, Intervention
+from tools.sim.driving.scenario import FrameEvent
+from tools.sim.pictures.text import draw_text, text_size
+from tools.sim.pictures.viz import TAKEOVER_MARK_S, StripCollector, annotate
+from tools.sim.vehicle.kinematic import VehicleState
 
 
 def _event(t: float, intervention: Intervention | None = None, seed: int = 0) -> FrameEvent:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
-from tools.sim.cones import place_cones
-from tools.sim.render import Renderer
-from tools.sim.track import Track
-from tools.sim.track_file import parse_track
-from tools.sim.world import Pose, World, clear_caches, get_world, sun_for
+from tools.sim.render.renderer import Renderer
+from tools.sim.render.world import Pose, World, clear_caches, get_world, sun_for
+from tools.sim.track.cones import place_cones
+from tools.sim.track.files import parse_track
+from tools.sim.track.road import Track
 
 STRAIGHT = 160.0  # metres of straight road in the test stadium
 

@@ -11,13 +11,13 @@ import pytest
 
 from protocol import SteerCommand
 from tests.conftest import write_stadium
-from tools.sim.autopilot import AutopilotParams
-from tools.sim.drivers import AutopilotDriver, Frame, LocalDriver, Scene
-from tools.sim.rules import DEFAULT_RULES, Cause, Referee, Rules, angle_diff, body_hits, degree_of_autonomy
-from tools.sim.scenario import ScenarioConfig
-from tools.sim.session import run_scenario
-from tools.sim.simulation import Simulation
-from tools.sim.vehicle import kmh_to_mps, mps_to_kmh
+from tools.sim.driving.autopilot import AutopilotParams
+from tools.sim.driving.drivers import AutopilotDriver, Frame, LocalDriver, Scene
+from tools.sim.driving.rules import DEFAULT_RULES, Cause, Referee, Rules, angle_diff, body_hits, degree_of_autonomy
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.session import run_scenario
+from tools.sim.driving.simulation import Simulation
+from tools.sim.vehicle.kinematic import kmh_to_mps, mps_to_kmh
 
 
 def stadium(tmp_path, lanes: int = 1, road_width: float = 8.0, straight: float = 150.0, radius: float = 40.0) -> str:
@@ -169,7 +169,7 @@ def test_cone_hits_are_interventions_and_collisions(tmp_path):
     class ConeSeeker(AutopilotDriver):
         def start(self, scene: Scene) -> None:  # an autopilot that aims AT the cones
             super().start(scene)
-            from tools.sim.autopilot import Autopilot
+            from tools.sim.driving.autopilot import Autopilot
 
             params = replace(AutopilotParams(), cone_clearance_m=0.0, cone_hold_m=8.0)
             self.autopilot = Autopilot(scene.track, scene.direction, scene.cones, params, scene.vehicle, seed=0)

@@ -16,9 +16,9 @@ import pytest
 
 from protocol import SteerCommand
 from protocol.facts import COLLECT_SPEED_KMH
-from tools.sim.drivers import AutopilotDriver, Frame, LocalDriver, OnnxDriver, Reply, Scene, SocketDriver
-from tools.sim.scenario import ScenarioConfig
-from tools.sim.session import PIPELINE_DEPTH, run_scenario
+from tools.sim.driving.drivers import AutopilotDriver, Frame, LocalDriver, OnnxDriver, Reply, Scene, SocketDriver
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.session import PIPELINE_DEPTH, run_scenario
 
 
 @pytest.mark.parametrize("vehicle", ["kinematic", "dynamic"])

@@ -1,7 +1,7 @@
 """Seeds perturb the spawn only when asked (rbc eval), never seed 0, always reproducibly."""
 
-from tools.sim.scenario import ScenarioConfig
-from tools.sim.simulation import Simulation
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.simulation import Simulation
 
 
 def pose(**kw):

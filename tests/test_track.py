@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tools.sim.cones import CONE_RADIUS, CONE_START_CLEARANCE, place_cones
-from tools.sim.track import Track, TrackError
-from tools.sim.track_file import builtin_tracks, load_track, parse_track
+from tools.sim.track.cones import CONE_RADIUS, CONE_START_CLEARANCE, place_cones
+from tools.sim.track.files import builtin_tracks, load_track, parse_track
+from tools.sim.track.road import Track, TrackError
 
 
 def oval(radius: float = 40.0, straight: float = 60.0, n: int = 24) -> list[list[float]]:

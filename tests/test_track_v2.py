@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from tests.conftest import write_stadium
-from tools.sim.postfx import PostFx, tone_lut
-from tools.sim.render import Renderer
-from tools.sim.track import SURFACE_KINDS, THEMES, Track, TrackError
-from tools.sim.track_file import load_track, parse_track
-from tools.sim.vehicle import VehicleParams
-from tools.sim.world import Pose, World, get_world
+from tools.sim.render.postfx import PostFx, tone_lut
+from tools.sim.render.renderer import Renderer
+from tools.sim.render.world import Pose, World, get_world
+from tools.sim.track.files import load_track, parse_track
+from tools.sim.track.road import SURFACE_KINDS, THEMES, Track, TrackError
+from tools.sim.vehicle.kinematic import VehicleParams
 
 # sha256 prefixes of 24 frames per track (12 poses around the lap: centre camera; left camera dimmed and
 # bumped), computed on the commit before format version 2 (bc6a0cd); they must never change.

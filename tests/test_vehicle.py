@@ -7,7 +7,7 @@ import math
 import pytest
 
 from protocol import KMH_PER_MPH
-from tools.sim.vehicle import Vehicle, VehicleParams, VehicleState, kmh_to_mps, mps_to_kmh
+from tools.sim.vehicle.kinematic import Vehicle, VehicleParams, VehicleState, kmh_to_mps, mps_to_kmh
 
 
 def _car(speed: float = 0.0, yaw: float = 0.0, params: VehicleParams | None = None) -> Vehicle:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tools.sim.dynamics import DynamicVehicle, brush_lateral_force, make_vehicle
-from tools.sim.track import SURFACE_KINDS
-from tools.sim.vehicle import GRAVITY_MPS2, Vehicle, VehicleParams, VehicleState, kmh_to_mps
+from tools.sim.track.road import SURFACE_KINDS
+from tools.sim.vehicle.dynamics import DynamicVehicle, brush_lateral_force, make_vehicle
+from tools.sim.vehicle.kinematic import GRAVITY_MPS2, Vehicle, VehicleParams, VehicleState, kmh_to_mps
 
 P = VehicleParams()
 
@@ -211,8 +211,8 @@ def test_the_simulation_gives_the_car_the_surface_it_drives_on(tmp_path):
 
     from protocol import SteerCommand
     from tests.conftest import write_stadium
-    from tools.sim.scenario import ScenarioConfig
-    from tools.sim.simulation import Simulation
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.simulation import Simulation
 
     def braking_distance(surface: str) -> float:
         path = tmp_path / f"{surface}.json"
@@ -234,8 +234,8 @@ def test_the_simulation_gives_the_car_the_surface_it_drives_on(tmp_path):
 
 def test_telemetry_reports_the_wheel_angle_and_speed_of_the_dynamic_car():
     from protocol import SteerCommand
-    from tools.sim.scenario import ScenarioConfig
-    from tools.sim.simulation import Simulation
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.simulation import Simulation
 
     sim = Simulation(ScenarioConfig(track="lake", vehicle="dynamic", speed_unit="kmh"), render=False)
     sim.advance(240, SteerCommand(0.3, 1.0))

@@ -12,8 +12,8 @@ import pytest
 from protocol.datalog import read_log
 from protocol.datalog_writer import LogWriter
 from tools.cli import main
-from tools.sim import video as video_mod
-from tools.sim.recording_video import write_recording_video
+from tools.sim.pictures import video as video_mod
+from tools.sim.pictures.recording_video import write_recording_video
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 
@@ -71,7 +71,7 @@ def test_a_pause_in_the_frames_is_marked_as_an_intervention(tmp_path: Path) -> N
 
 
 def test_rbc_sim_video_uses_the_same_writer(tmp_path: Path) -> None:
-    from tools.sim.viz import VideoRecorder
+    from tools.sim.pictures.viz import VideoRecorder
 
     rec = VideoRecorder(tmp_path / "lap.mp4", 15)
     assert isinstance(rec._writer, video_mod.VideoWriter) and rec.backend in (video_mod.H264, video_mod.MP4V)

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from tools.cli import main
-from tools.sim.geometry import closest_overlap
-from tools.sim.track import TrackError
-from tools.sim.track_file import load_track, parse_track
+from tools.sim.track.files import load_track, parse_track
+from tools.sim.track.geometry import closest_overlap
+from tools.sim.track.road import TrackError
 from tools.sim.worldgen import (
     SEED_RANGES,
     WorldGenConfig,
@@ -134,8 +134,8 @@ def test_world_seed_names_the_generated_world_wherever_a_track_is_asked_for(tmp_
 
 def test_generated_frames_are_plausible():
     """Road in view: the bottom centre of the frame on the start straight differs from the sky."""
-    from tools.sim.render import Renderer
-    from tools.sim.world import Pose, World
+    from tools.sim.render.renderer import Renderer
+    from tools.sim.render.world import Pose, World
 
     track = parse_track(generate_world(1_000_001, FAST), "w")
     x, y, h = track.point_at(track.start_s + 10)

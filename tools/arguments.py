@@ -68,7 +68,7 @@ def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
 
 def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
     """``--vehicle``: which car model the headless simulator drives."""
-    from tools.sim.vehicle import VEHICLE_KINDS
+    from tools.sim.vehicle.kinematic import VEHICLE_KINDS
 
     parser.add_argument("--vehicle", choices=VEHICLE_KINDS, default=default,
                         help="car model: dynamic single-track with tyre slip, or the kinematic bicycle "

@@ -19,11 +19,11 @@ import cv2
 import numpy as np
 
 from protocol.facts import DEPLOY_SPEED_KMH, JPEG_QUALITY
-from tools.sim.cones import place_cones
-from tools.sim.render import Renderer
-from tools.sim.text import draw_text
-from tools.sim.track import Track
-from tools.sim.world import Pose, clear_caches, get_world
+from tools.sim.pictures.text import draw_text
+from tools.sim.render.renderer import Renderer
+from tools.sim.render.world import Pose, clear_caches, get_world
+from tools.sim.track.cones import place_cones
+from tools.sim.track.road import Track
 
 log = logging.getLogger(__name__)
 
@@ -117,9 +117,9 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace, vehicle: str = 
     import tempfile
 
     from drive_server.models_dir import bundled_model_path
-    from tools.sim.drivers import SocketDriver
-    from tools.sim.scenario import ScenarioConfig
-    from tools.sim.session import run_scenario
+    from tools.sim.driving.drivers import SocketDriver
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.session import run_scenario
     from tools.wire.server_process import ServerProcess
 
     with tempfile.TemporaryDirectory(prefix="rbc_simbench_") as tmp:

@@ -1,6 +1,6 @@
 """What the car models cost: physics per step, the in-process closed loop per frame, and CommonRoad's.
 
-``rbc sim-bench`` prints these so the choice made in :mod:`tools.sim.dynamics` (write the single-track
+``rbc sim-bench`` prints these so the choice made in :mod:`tools.sim.vehicle.dynamics` (write the single-track
 equations here rather than call ``commonroad-vehicle-models``) can be re-checked on any machine: the
 CommonRoad figures appear when that package is installed (``pip install -e ".[commonroad]"``).
 """
@@ -12,7 +12,7 @@ import math
 import time
 from collections.abc import Callable
 
-from tools.sim.vehicle import VEHICLE_KINDS, VehicleParams, VehicleState
+from tools.sim.vehicle.kinematic import VEHICLE_KINDS, VehicleParams, VehicleState
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +30,7 @@ def _best_us(fn: Callable[[], None], calls: int, repeats: int) -> float:
 
 def physics_step_costs(repeats: int = 3, frames: int = 6000) -> list[str]:
     """Per 60 Hz simulation frame for each car model (weaving, accelerating and braking)."""
-    from tools.sim.dynamics import make_vehicle
+    from tools.sim.vehicle.dynamics import make_vehicle
 
     params = VehicleParams()
     lines = []
@@ -76,7 +76,7 @@ def _commonroad_costs(repeats: int) -> list[str]:
 
 
 def _commonroad_physics(p, st, std, init_std) -> list[str]:
-    """The two behaviours that rule CommonRoad's models out here (see tools.sim.dynamics)."""
+    """The two behaviours that rule CommonRoad's models out here (see tools.sim.vehicle.dynamics)."""
     hz = 180
     x = [0.0, 0.0, 0.3, 30.0, 0.0, 0.0, 0.0]  # ST at 30 m/s holding 0.3 rad of wheel angle
     for _ in range(10 * hz):
@@ -96,12 +96,12 @@ def inprocess_loop(track: str, vehicle: str, seconds: float = 40.0) -> str:
 
     No network model: it measures what the simulator itself costs per telemetry frame.
     """
-    from tools.sim.drivers import AutopilotDriver
-    from tools.sim.scenario import ScenarioConfig
-    from tools.sim.session import run_scenario
+    from tools.sim.driving.drivers import AutopilotDriver
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.session import run_scenario
 
     config = ScenarioConfig(track=track, vehicle=vehicle, max_lap_time_s=seconds)
-    sim_log = logging.getLogger("tools.sim.simulation")
+    sim_log = logging.getLogger("tools.sim.driving.simulation")
     level = sim_log.level
     sim_log.setLevel(logging.WARNING)  # the lap ends on its time limit, on purpose
     try:

@@ -1,6 +1,6 @@
 """``rbc collect``: record a Udacity-format training set with the autopilot on the headless simulator.
 
-With ``--worlds N`` over N procedural training worlds at once (:mod:`tools.sim.collect_worlds`).
+With ``--worlds N`` over N procedural training worlds at once (:mod:`tools.sim.collect.worlds`).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 from tools.arguments import add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress, bar
 from tools.errors import CommandError
-from tools.sim.collect import CollectConfig
-from tools.sim.collect_backends import BACKENDS
+from tools.sim.collect.backends import BACKENDS
+from tools.sim.collect.dataset import CollectConfig
 
 log = logging.getLogger("rbc.collect")
 
@@ -48,7 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     group.add_argument("--overwrite", action="store_true", help="replace an existing log and IMG/ in --out")
     group.add_argument("--append", action="store_true", help="add rows to an existing log in --out")
     group.add_argument("--resume", action="store_true",
-                       help="with --worlds: continue an interrupted collection in --out (finished worlds are kept)")
+                       help="continue a collection in --out stopped by Ctrl-C or a full disk, with the same flags "
+                            "(its complete rows, or with --worlds its finished worlds, are kept)")
     w = p.add_argument_group("procedural worlds (instead of --track)")
     w.add_argument("--worlds", type=int, default=None, metavar="N",
                    help="collect over N generated worlds, seeds --world-seed .. +N-1, into one data set "
@@ -72,7 +73,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _light_range(text: str) -> tuple[float, float]:
     """``LO:HI`` for argparse, which turns the ArgumentTypeError into a one-line usage error."""
-    from tools.sim.collect_worlds import light_range_problem
+    from tools.sim.collect.worlds import light_range_problem
 
     lo, sep, hi = text.partition(":")
     try:
@@ -94,7 +95,7 @@ def _config(args: argparse.Namespace) -> CollectConfig:
 
 
 def _worlds(args: argparse.Namespace) -> int:
-    from tools.sim.collect_worlds import WorldsConfig, collect_worlds, training_seed_problem
+    from tools.sim.collect.worlds import WorldsConfig, collect_worlds, training_seed_problem
     from tools.sim.worldgen.config import WorldGenConfig, parse_world_config
 
     if args.track or args.append:
@@ -145,8 +146,8 @@ def _worlds(args: argparse.Namespace) -> int:
 
 def _refuse_held_out_world(track: str, allowed: bool) -> None:
     """``--track world:SEED`` records training data: a seed outside the training range is refused."""
-    from tools.sim.collect_worlds import training_seed_problem
-    from tools.sim.track_file import world_seed_of
+    from tools.sim.collect.worlds import training_seed_problem
+    from tools.sim.track.files import world_seed_of
 
     seed = world_seed_of(track)  # a malformed name is a TrackError: one line at the CLI's error boundary
     problem = training_seed_problem(seed, 1) if seed is not None else None
@@ -159,12 +160,10 @@ def _refuse_held_out_world(track: str, allowed: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.worlds is not None:
         return _worlds(args)
-    if args.resume:
-        raise CommandError("--resume continues a --worlds collection", "add --worlds N --world-seed S")
     if args.light_range:
         raise CommandError("--light-range draws a light intensity per generated world",
                            "add --worlds N, or give one --light-intensity for --track")
-    from tools.sim.collect import collect
+    from tools.sim.collect.dataset import collect
     from tools.sim.worldgen.generate import resolve_track_name
 
     config = _config(args)
@@ -173,7 +172,8 @@ def run(args: argparse.Namespace) -> int:
     config = replace(config, track=resolve_track_name(config.track))  # world:SEED -> its file
     progress = Progress(f"collect {args.track}")
     try:
-        result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress)
+        result = collect(config, args.out, overwrite=args.overwrite, append=args.append, progress=progress,
+                         resume=args.resume)
     finally:
         progress.close()
     rate = result.rows / result.wall_time_s if result.wall_time_s else 0.0

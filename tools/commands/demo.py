@@ -16,7 +16,7 @@ from protocol.facts import BEHAVIORS
 from tools.arguments import add_vehicle_argument
 from tools.errors import CommandError
 from tools.evaluate.experiments import SETUPS
-from tools.sim.scenario import ScenarioConfig
+from tools.sim.driving.scenario import ScenarioConfig
 
 log = logging.getLogger("rbc.demo")
 
@@ -51,11 +51,11 @@ def run(args: argparse.Namespace) -> int:
     from drive_server.models_dir import bundled_model_path, demo_model_path
     from drive_server.runrecords import write_json
     from tools.console import Progress
-    from tools.sim.drivers import SocketDriver
-    from tools.sim.pacing import WallClockPacer, hooks
-    from tools.sim.session import run_scenario
-    from tools.sim.summary import print_summary
-    from tools.sim.viz import StripCollector, write_trajectory_map
+    from tools.sim.driving.drivers import SocketDriver
+    from tools.sim.driving.pacing import WallClockPacer, hooks
+    from tools.sim.driving.session import run_scenario
+    from tools.sim.driving.summary import print_summary
+    from tools.sim.pictures.viz import StripCollector, write_trajectory_map
     from tools.wire.server_process import ServerProcess, ServerStartError
 
     model = args.model or (bundled_model_path(args.behavior) if args.behavior else demo_model_path())

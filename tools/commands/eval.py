@@ -27,7 +27,7 @@ from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, spec_dict
 from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
-from tools.sim.track_file import get_track
+from tools.sim.track.files import get_track
 from tools.sim.worldgen import world_seed_range
 
 log = logging.getLogger("rbc.eval")
@@ -145,6 +145,11 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         interrupted = True
         log.warning("interrupted: keeping the %d finished runs", len(runner.records))
+    except BaseException:  # a full disk under the journal, say: cancel the runs in flight and say so once
+        interrupted = True
+        log.warning("stopped: the %d finished runs are journaled in %s (continue with the same command plus "
+                    "--resume)", len(runner.records), journal)
+        raise
     finally:
         runner.close(cancel=interrupted)
         bar.close(finished=not interrupted)

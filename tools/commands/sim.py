@@ -10,9 +10,9 @@ from drive_server.pipeline import DriveConfig
 from tools.arguments import add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.errors import CommandError
-from tools.sim.pacing import hooks as on_frame_hooks
-from tools.sim.scenario import ScenarioConfig
-from tools.sim.summary import print_summary
+from tools.sim.driving.pacing import hooks as on_frame_hooks
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.summary import print_summary
 
 log = logging.getLogger("rbc.sim")
 
@@ -66,7 +66,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _driver(args: argparse.Namespace):
-    from tools.sim.drivers import AutopilotDriver, OnnxDriver, SocketDriver
+    from tools.sim.driving.drivers import AutopilotDriver, OnnxDriver, SocketDriver
 
     if args.server:
         return SocketDriver(args.server)
@@ -77,9 +77,9 @@ def _driver(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.sim.scenario import ScenarioConfig
-    from tools.sim.session import run_scenario
-    from tools.sim.track_file import get_track
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.session import run_scenario
+    from tools.sim.track.files import get_track
     from tools.sim.worldgen.generate import resolve_track_name
 
     args.track = resolve_track_name(args.track)  # world:SEED -> its file
@@ -103,12 +103,12 @@ def run(args: argparse.Namespace) -> int:
     hooks = []
     strip = video = None
     if args.strip:
-        from tools.sim.viz import StripCollector
+        from tools.sim.pictures.viz import StripCollector
 
         strip = StripCollector(every_s=args.strip_every)
         hooks.append(strip)
     if args.video:
-        from tools.sim.viz import VideoRecorder
+        from tools.sim.pictures.viz import VideoRecorder
 
         fps = 60.0 if args.realtime else args.control_hz
         video = VideoRecorder(args.video, fps)
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         write_json(args.json, result.to_dict())
         print(f"json  {args.json}")
     if args.map:
-        from tools.sim.viz import write_trajectory_map
+        from tools.sim.pictures.viz import write_trajectory_map
 
         print(f"map   {write_trajectory_map(result, args.map)}")
     if strip is not None and strip.frames:

@@ -12,9 +12,9 @@ import cv2
 
 from tools.bench.simulator import bench_track, lap_wall_time, write_sheet
 from tools.bench.vehicle_models import inprocess_loop, physics_step_costs
-from tools.sim.cones import place_cones
-from tools.sim.track_file import load_track
-from tools.sim.vehicle import VEHICLE_KINDS
+from tools.sim.track.cones import place_cones
+from tools.sim.track.files import load_track
+from tools.sim.vehicle.kinematic import VEHICLE_KINDS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,5 +1,5 @@
 """``rbc video DIR --out run.mp4``: a browser-playable video of a recording (library:
-:mod:`tools.sim.recording_video`); headless laps get the same writer through ``rbc sim --video``."""
+:mod:`tools.sim.pictures.recording_video`); headless laps get the same writer through ``rbc sim --video``."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from tools.arguments import add_speed_unit_argument
-from tools.sim.recording_video import GAP_S
+from tools.sim.pictures.recording_video import GAP_S
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tools.console import Progress
-    from tools.sim.recording_video import write_recording_video
+    from tools.sim.pictures.recording_video import write_recording_video
 
     progress = Progress(f"video {args.source.name}", unit="frame")
     try:

@@ -8,7 +8,7 @@ leaves its lane; the degree of autonomy is the paper's Eq. 1.
 Owns: the real simulator's camera model and its calibration from the side cameras (``camera``,
 ``calibrate``), the recorded path (``path``), the loop and its drivers (``loop``), and its pictures
 (``pictures``). May import ``protocol``, ``drive_server`` (the serving pipeline, so the model sees exactly
-what the server would give it), ``tools.realdata`` (frame time stamps) and ``tools.sim.rules`` (the
+what the server would give it), ``tools.realdata`` (frame time stamps) and ``tools.sim.driving.rules`` (the
 degree of autonomy) and ``models.labels`` (numpy only); never torch.
 
 Why not MIT's VISTA (``vista`` 2.0.6 on PyPI, the field's data-driven simulator): its sdist declares no

@@ -23,7 +23,7 @@ import numpy as np
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ViewSynthesizer
 from tools.drivelog.path import WHEELBASE_M, RecordedDrive, advance, curvature
-from tools.sim.rules import degree_of_autonomy
+from tools.sim.driving.rules import degree_of_autonomy
 
 #: Below this speed (m/s) the car is standing or creeping: time there is not counted as driving.
 MOVING_MPS = 1.0
@@ -84,7 +84,7 @@ class LoopResult:
 
     @property
     def eta(self) -> float:
-        from tools.sim.rules import Rules
+        from tools.sim.driving.rules import Rules
 
         eta, _ = degree_of_autonomy(self.interventions, self.driving_time_s,
                                     Rules(seconds_per_intervention=self.rules.seconds_per_intervention))

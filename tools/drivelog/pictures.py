@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from tools.drivelog.loop import LoopResult
-from tools.sim.text import draw_text
+from tools.sim.pictures.text import draw_text
 
 _RED, _GREY, _BLUE, _WHITE = (60, 60, 230), (150, 150, 150), (200, 120, 40), (245, 245, 245)
 

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.errors import CommandError
-from tools.evaluate.runner import DriverSpec, Runner, Task, run_task
+from tools.evaluate.runner import DriverSpec, Runner, Task, pass_on, run_task
 from tools.ray_support import BACKENDS, INSTALL_HINT, import_ray, init_ray
 
 log = logging.getLogger(__name__)
@@ -71,8 +71,10 @@ class RayRunner(Runner):
             self._pending[ref] = outer
         ref.future().add_done_callback(lambda f: self._settle(task, outer, attempt, ref, f))
 
-    def _record(self, future: Future) -> None:
-        """Nothing: :meth:`_settle` journals a run before its future resolves, so none is missed at close."""
+    def _record(self, inner: Future, outer: Future) -> None:
+        """Pass the run on: :meth:`_settle` journals a run before its future resolves, so none is missed at close."""
+        if pass_on(inner, outer):
+            outer.set_result(inner.result())
 
     def _settle(self, task: Task, outer: Future, attempt: int, ref: Any, done: Future) -> None:
         with self._lock:
@@ -80,7 +82,12 @@ class RayRunner(Runner):
                 return
         exc = done.exception()
         if exc is None:
-            self._keep(done.result())  # journaled before anyone waiting on the run sees it
+            try:
+                self._keep(done.result())  # journaled before anyone waiting on the run sees it
+            except OSError as error:  # the journal cannot be written (a full disk): the evaluation stops
+                self.failure = self.failure or error
+                outer.set_exception(error)
+                return
             outer.set_result(done.result())
             return
         what = f"{task.experiment} value={task.value} seed={task.seed}"

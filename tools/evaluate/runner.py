@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.appending import append_record
 from protocol.facts import MAX_STEERING_DEG
 
 log = logging.getLogger(__name__)
@@ -58,7 +59,7 @@ _DRIVERS: dict[tuple, Any] = {}
 
 def _driver(spec: DriverSpec, speed_limit_kmh: float):
     """One driver per worker process (and per speed limit for the in-process control law)."""
-    from tools.sim.drivers import OnnxDriver, SocketDriver
+    from tools.sim.driving.drivers import OnnxDriver, SocketDriver
 
     key = (spec, speed_limit_kmh if spec.model and not spec.server else None)
     if key not in _DRIVERS:
@@ -76,9 +77,9 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
 
     cv2.setNumThreads(1)
     from tools.evaluate.experiments import is_autonomous
-    from tools.sim.scenario import ScenarioConfig
-    from tools.sim.session import run_scenario
-    from tools.sim.track_file import write_track_file
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.session import run_scenario
+    from tools.sim.track.files import write_track_file
 
     if task.track_doc is not None and not Path(task.scenario["track"]).is_file():
         write_track_file(task.scenario["track"], task.track_doc)  # a worker on a node without the file
@@ -89,7 +90,7 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
               "wall_time_s": round(time.perf_counter() - started, 3), **result.to_dict(), "scenario": task.scenario}
     record["autonomous"] = is_autonomous(record)
     if task.map_dir and not record["autonomous"]:
-        from tools.sim.viz import write_trajectory_map
+        from tools.sim.pictures.viz import write_trajectory_map
 
         path = Path(task.map_dir) / f"{task.experiment}_{task.value}_seed{task.seed}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -161,6 +162,7 @@ class Runner:
         self.retried: list[dict[str, Any]] = []  # runs a backend retried after a failure, for the record
         self._reuse = dict(reuse or {})
         self._lock = threading.Lock()
+        self.failure: OSError | None = None  # the first journal write that failed: the evaluation stops
         self._pool = self._start(workers)
 
     def _start(self, workers: int) -> Any:
@@ -182,18 +184,27 @@ class Runner:
             if self.on_result:
                 self.on_result(done)
             return future
+        if self.failure is not None:  # the journal cannot be written (a full disk): start nothing new
+            raise self.failure
         future = self._launch(task)
-        future.add_done_callback(self._record)
-        return future
+        outer: Future = Future()  # resolves once the run is journaled; a journal error is its exception
+        future.add_done_callback(lambda inner: self._record(inner, outer))
+        return outer
 
     def run(self, tasks: Iterable[Task]) -> list[dict[str, Any]]:
         futures = [self.submit(t) for t in tasks]
         return [f.result() for f in futures]
 
-    def _record(self, future: Future) -> None:
-        if future.cancelled() or future.exception() is not None:
+    def _record(self, inner: Future, outer: Future) -> None:
+        if not pass_on(inner, outer):
             return
-        self._keep(future.result())
+        try:
+            self._keep(inner.result())
+        except OSError as exc:
+            self.failure = self.failure or exc
+            outer.set_exception(exc)
+            return
+        outer.set_result(inner.result())
 
     def _keep(self, record: dict[str, Any]) -> None:
         """Journal a finished run and tell ``on_result``."""
@@ -202,14 +213,24 @@ class Runner:
             # that never failed. Neither journaled (a resume would reuse it) nor counted as a result.
             return
         with self._lock:
+            append_record(self.journal, (json.dumps(record) + "\n").encode("utf-8"))  # whole, or raises
             self.records.append(record)
-            with self.journal.open("a", encoding="utf-8") as fh:
-                fh.write(json.dumps(record) + "\n")
         if self.on_result:
             self.on_result(record)
 
     def close(self, cancel: bool = False) -> None:
         self._pool.shutdown(wait=not cancel, cancel_futures=cancel)
+
+
+def pass_on(inner: Future, outer: Future) -> bool:
+    """Give ``outer`` the cancellation or the exception of the finished ``inner``; True if it has a result."""
+    if inner.cancelled():
+        outer.cancel()
+        return False
+    if inner.exception() is not None:
+        outer.set_exception(inner.exception())
+        return False
+    return True
 
 
 def spec_dict(spec: DriverSpec) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from protocol.facts import DEPLOY_SPEED_KMH
 from tools.evaluate.experiments import EXPERIMENTS, PAPER_EXPERIMENTS, SETUPS, Experiment, is_autonomous, run_eta
 from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
-from tools.sim.vehicle import VEHICLE_KINDS
+from tools.sim.vehicle.kinematic import VEHICLE_KINDS
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ def base_scenario(cfg: SuiteConfig) -> dict[str, Any]:
 def _scenario_for(exp: Experiment, value: Any, cfg: SuiteConfig, seed: int) -> dict[str, Any]:
     scenario = {**base_scenario(cfg), **exp.fixed, "seed": seed, "realtime": exp.realtime, "spawn_noise": True}
     if exp.parameter == "spawn_fraction":
-        from tools.sim.track_file import load_track
+        from tools.sim.track.files import load_track
 
         scenario["spawn_s"] = float(value) * load_track(scenario["track"]).length
     elif exp.parameter is not None:

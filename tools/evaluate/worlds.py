@@ -16,7 +16,7 @@ from typing import Any
 
 from drive_server.runrecords import file_sha256
 from tools.evaluate.experiments import experiment, is_autonomous, run_eta
-from tools.sim.track_file import track_text, write_track_file
+from tools.sim.track.files import track_text, write_track_file
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, generate_world, world_seed_range
 
 KEY = "unseen_worlds"

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from drive_server.runrecords import file_sha256, write_bytes
 from tools.ray_support import BACKENDS
-from tools.sim.collect import CollectConfig, collect
+from tools.sim.collect.dataset import CollectConfig, collect
 from tools.sim.worldgen import WorldGenConfig, write_world
 
 log = logging.getLogger(__name__)

@@ -7,8 +7,11 @@ simulated time, so any Udacity-style training script reads it.
 
 The autopilot decides every physics frame, like a person at a keyboard; rows are recorded at
 ``rate_hz`` with the steering key axis at that moment as the label (what Unity logs). Each row is
-written with one ``write`` and flushed after its images exist, so Ctrl-C leaves a consistent log:
+written with one ``write`` after its images exist, so Ctrl-C or a full disk leaves a consistent log:
 never a half row, never a row without its images (the images of an unfinished row are removed).
+``resume=True`` drives the same laps again and writes only the rows after the last complete one
+(the kept rows are checked against what this configuration records; their frames are not rendered
+again), so a collection stopped by a full disk or Ctrl-C ends as the uninterrupted one would.
 """
 
 from __future__ import annotations
@@ -22,16 +25,16 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from protocol import SpeedUnit
-from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name, last_row_stamp
+from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, format_row, frame_name, last_row_stamp
 from protocol.facts import CAMERAS, COLLECT_SPEED_KMH
 from protocol.jpeg import encode_jpeg
 from protocol.units import from_kmh
-from tools.sim.autopilot import Autopilot, AutopilotParams
-from tools.sim.cones import place_cones
-from tools.sim.rules import LapResult
-from tools.sim.scenario import ScenarioConfig
-from tools.sim.simulation import Simulation
-from tools.sim.track_file import get_track
+from tools.sim.driving.autopilot import Autopilot, AutopilotParams
+from tools.sim.driving.rules import LapResult
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.simulation import Simulation
+from tools.sim.track.cones import place_cones
+from tools.sim.track.files import get_track
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +60,7 @@ class CollectConfig:
     light_intensity: float = 1.0
     light_direction_deg: float = 0.0
     sim_fps: int = 60
-    vehicle: str = ScenarioConfig.vehicle  # "kinematic" or "dynamic" (tools.sim.dynamics)
+    vehicle: str = ScenarioConfig.vehicle  # "kinematic" or "dynamic" (tools.sim.vehicle.dynamics)
 
     def __post_init__(self) -> None:
         if self.cameras not in (1, 3):
@@ -105,18 +108,44 @@ def prepare_output(out_dir: Path, overwrite: bool = False, append: bool = False)
     return EPOCH if last is None else last + dt.timedelta(seconds=10)
 
 
+def kept_rows(out_dir: Path) -> list[str]:
+    """The complete rows of an earlier collection in ``out_dir`` whose images all exist, in order; the
+    log is cut back to them (a row without its images and everything after it is driven again)."""
+    log_path = out_dir / LOG_NAME
+    if not log_path.is_file():
+        raise OutputDirError(f"--resume: {out_dir} holds no {LOG_NAME} to continue; drop --resume to start")
+    text = log_path.read_text(encoding="utf-8")
+    lines = text.split("\n")[:-1]  # the part after the last newline is no complete row
+    kept: list[str] = []
+    for line in lines:
+        images = [c.strip() for c in line.split(",")[:3] if c.strip()]
+        if not images or not all(Path(i).is_file() and Path(i).stat().st_size for i in images):
+            break
+        kept.append(line)
+    cut = "".join(line + "\n" for line in kept)
+    if cut != text:
+        log.info("--resume: %s cut back to its %d complete rows", log_path, len(kept))
+        with log_path.open("r+b") as fh:
+            fh.truncate(len(cut.encode("utf-8")))
+    return kept
+
+
 def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, append: bool = False,
-            progress: Callable[[float, float], None] | None = None, start: dt.datetime | None = None
-            ) -> CollectResult:
+            progress: Callable[[float, float], None] | None = None, start: dt.datetime | None = None,
+            resume: bool = False) -> CollectResult:
     """Drive ``config.laps`` laps (per direction) with the autopilot and record them to ``out_dir``.
 
     ``start`` is the time of the first row (frame names); by default the fixed epoch, or after the
     last row when appending. Several worlds of one data set each get their own (unique image names).
+    ``resume``: continue an earlier collection of the same configuration (see the module docstring).
     """
     out_dir = Path(out_dir).resolve()
     track = get_track(config.track)  # a bad track or cone count is an error before any output exists
     place_cones(track, config.cones, config.cone_seed)
-    first = prepare_output(out_dir, overwrite, append)
+    if resume and (overwrite or append):
+        raise ValueError("--resume continues a collection: not with --overwrite or --append")
+    kept = kept_rows(out_dir) if resume else []
+    first = EPOCH if resume else prepare_output(out_dir, overwrite, append)
     start = first if start is None else start
     result = CollectResult(out_dir=out_dir, rows=0, zero_steer_rows=0)
     directions = (False, True) if config.both_directions else (False,)
@@ -126,6 +155,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
     img_dir = out_dir / IMAGE_DIR
     pending: list[Path] = []
     sim: Simulation | None = None
+    row = 0  # rows of this collection so far, kept ones included
     with LogWriter(out_dir / LOG_NAME) as writer:
         try:
             for k, reverse in enumerate(directions):
@@ -150,14 +180,23 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                         when = start + dt.timedelta(seconds=round(clock + sim.t, 3))
                         jitter = sim.camera_jitter()
                         paths = [img_dir / frame_name(cam, when) for cam in cameras]
-                        pending = paths
-                        for cam, path in zip(cameras, paths, strict=True):
-                            path.write_bytes(encode_jpeg(sim.render(cam, jitter), sim.jpeg_quality))
                         st = sim.vehicle.state
                         speed = from_kmh(st.speed * 3.6, config.speed_unit)
-                        pending = []  # from here on an interrupt may orphan images, never a row
-                        writer.write([str(p) for p in paths], command.steering, max(0.0, command.throttle),
-                                     max(0.0, -command.throttle), speed)
+                        cells = ([str(p) for p in paths], command.steering, max(0.0, command.throttle),
+                                 max(0.0, -command.throttle), speed)
+                        if row < len(kept):  # recorded before: checked, not rendered again
+                            if format_row(*cells) != kept[row]:
+                                raise OutputDirError(
+                                    f"--resume: row {row + 1} of {out_dir / LOG_NAME} is not what this "
+                                    "configuration records (it was collected with other settings); use the "
+                                    "same flags as the first run, or a new --out")
+                        else:
+                            pending = paths
+                            for cam, path in zip(cameras, paths, strict=True):
+                                path.write_bytes(encode_jpeg(sim.render(cam, jitter), sim.jpeg_quality))
+                            writer.write(*cells)
+                            pending = []  # from here on an interrupt may orphan images, never a row
+                        row += 1
                         result.rows += 1
                         result.zero_steer_rows += command.steering == 0.0
                     sim.advance(1, command)
@@ -174,6 +213,12 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                         log.warning("%s lap %d: the autopilot needed %d intervention(s) %s; the log has a jump there",
                                     "reverse" if reverse else "forward", lap.lap, lap.n_interventions, lap.causes())
                 sim = None
+        except OSError:  # a full disk, say: the last row's images go, the rows before it stay
+            for path in pending:
+                path.unlink(missing_ok=True)
+            log.warning("stopped: %d complete rows in %s (continue with the same command plus --resume)",
+                        result.rows, out_dir / LOG_NAME)
+            raise
         except KeyboardInterrupt:
             result.interrupted = True
             if sim is not None:  # the drive that was cut short: its time and finished laps count too
@@ -181,6 +226,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                 result.laps.extend(sim.laps)
             for path in pending:  # images of a row that was never written
                 path.unlink(missing_ok=True)
-            log.warning("interrupted: %d complete rows in %s", result.rows, out_dir / LOG_NAME)
+            log.warning("interrupted: %d complete rows in %s (continue with the same command plus --resume)",
+                        result.rows, out_dir / LOG_NAME)
     result.wall_time_s = time.perf_counter() - wall0
     return result

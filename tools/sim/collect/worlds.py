@@ -30,8 +30,8 @@ import numpy as np
 
 from drive_server.runrecords import atomic_path, write_json, write_text
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME
-from tools.sim.collect import EPOCH, CollectConfig, OutputDirError
-from tools.sim.collect_backends import WORLD_TIME_SLOT, WorldJob, WorldOutcome, run_jobs
+from tools.sim.collect.backends import WORLD_TIME_SLOT, WorldJob, WorldOutcome, run_jobs
+from tools.sim.collect.dataset import EPOCH, CollectConfig, OutputDirError
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, seed_range_of, world_seed_range
 from tools.sim.worldgen.config import seed_label
 

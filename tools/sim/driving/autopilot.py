@@ -20,9 +20,9 @@ import numpy as np
 
 from protocol import SteerCommand
 from protocol.facts import COLLECT_SPEED_KMH
-from tools.sim.rules import TrackFollower, angle_diff
-from tools.sim.track import Track
-from tools.sim.vehicle import VehicleParams, VehicleState, kmh_to_mps
+from tools.sim.driving.rules import TrackFollower, angle_diff
+from tools.sim.track.road import Track
+from tools.sim.vehicle.kinematic import VehicleParams, VehicleState, kmh_to_mps
 
 
 @dataclass(frozen=True)

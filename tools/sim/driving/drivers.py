@@ -1,6 +1,6 @@
 """Who drives the simulated car: a drive server over the Unity wire, an ONNX model in-process, or the autopilot.
 
-Every driver has the same four calls, used by :func:`tools.sim.session.run_scenario`:
+Every driver has the same four calls, used by :func:`tools.sim.driving.session.run_scenario`:
 ``start(scene)`` before a run, ``send(frame)`` for each telemetry frame, ``receive()`` for the reply
 to the OLDEST frame not yet answered (FIFO, so two frames can be in flight as with Unity) and
 ``stop()`` after the run (frames still in flight are dropped). ``close()`` releases resources; a
@@ -25,8 +25,8 @@ import numpy as np
 
 from protocol import SpeedUnit, SteerCommand, Telemetry, encode_steer, parse_steer, parse_telemetry
 from protocol.facts import COLLECT_SPEED_KMH, DEPLOY_SPEED_KMH, MAX_STEERING_DEG
-from tools.sim.track import Track
-from tools.sim.vehicle import VehicleParams, VehicleState
+from tools.sim.track.road import Track
+from tools.sim.vehicle.kinematic import VehicleParams, VehicleState
 
 log = logging.getLogger(__name__)
 
@@ -139,7 +139,7 @@ class OnnxDriver(LocalDriver):
 
 
 class AutopilotDriver(LocalDriver):
-    """The scripted keyboard driver of :mod:`tools.sim.autopilot`, fed the ground truth."""
+    """The scripted keyboard driver of :mod:`tools.sim.driving.autopilot`, fed the ground truth."""
 
     name = "autopilot"
 
@@ -152,7 +152,7 @@ class AutopilotDriver(LocalDriver):
     def start(self, scene: Scene) -> None:
         from dataclasses import replace
 
-        from tools.sim.autopilot import Autopilot, AutopilotParams
+        from tools.sim.driving.autopilot import Autopilot, AutopilotParams
 
         super().start(scene)
         self._period = scene.control_period_s

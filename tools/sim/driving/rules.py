@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from tools.sim.cones import CONE_RADIUS
-from tools.sim.track import Projection, Track
-from tools.sim.vehicle import kmh_to_mps
+from tools.sim.track.cones import CONE_RADIUS
+from tools.sim.track.road import Projection, Track
+from tools.sim.vehicle.kinematic import kmh_to_mps
 
 
 class Cause(StrEnum):

@@ -10,12 +10,12 @@ import numpy as np
 
 from protocol import SpeedUnit, SteerCommand
 from protocol.facts import DEPLOY_SPEED_KMH
-from tools.sim.rules import (
+from tools.sim.driving.rules import (
     Intervention,
     LapResult,
     Rules,
 )
-from tools.sim.vehicle import VEHICLE_KINDS, VehicleState, kmh_to_mps
+from tools.sim.vehicle.kinematic import VEHICLE_KINDS, VehicleState, kmh_to_mps
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,7 @@ class ScenarioConfig:
     spawn_noise: bool = False
     max_lap_time_s: float | None = None  # None: 4x the time of a lap at the speed limit, at least 120 s
     speed_unit: str = SpeedUnit.MPH.value  # telemetry speed unit: mph like the stock simulator, or kmh
-    # the car: "kinematic" bicycle (no slip) or "dynamic" single-track model with tyre slip (tools.sim.dynamics)
+    # the car: "kinematic" bicycle (no slip) or "dynamic" single-track model with tyre slip (tools.sim.vehicle.dynamics)
     vehicle: str = VEHICLE_KINDS[0]
 
     def __post_init__(self) -> None:

@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 
 from protocol import encode_image
-from tools.sim.rules import DEFAULT_RULES, Rules
-from tools.sim.scenario import FrameEvent, RunResult, ScenarioConfig
-from tools.sim.simulation import Simulation
+from tools.sim.driving.rules import DEFAULT_RULES, Rules
+from tools.sim.driving.scenario import FrameEvent, RunResult, ScenarioConfig
+from tools.sim.driving.simulation import Simulation
 
 log = logging.getLogger(__name__)
 
@@ -49,14 +49,14 @@ __all__ = ["PIPELINE_DEPTH", "run_scenario"]
 def run_scenario(config: ScenarioConfig, driver: Any, progress: Callable[[float, float], None] | None = None,
                  on_frame: Callable[[FrameEvent], None] | None = None, rules: Rules = DEFAULT_RULES,
                  render: bool = True) -> RunResult:
-    """Drive ``config.laps`` laps with ``driver`` (see :mod:`tools.sim.drivers`) and score them.
+    """Drive ``config.laps`` laps with ``driver`` (see :mod:`tools.sim.driving.drivers`) and score them.
 
     ``progress(done_m, total_m)`` is called about once per simulated second; ``on_frame`` gets every
     telemetry frame. Ctrl-C ends the run early with the laps finished so far (``interrupted``).
     ``render=False`` sends frames without an image: only for drivers that use the ground truth (the
     autopilot), e.g. fast tests of the driving rules.
     """
-    from tools.sim.drivers import Frame, Scene
+    from tools.sim.driving.drivers import Frame, Scene
 
     sim = Simulation(config, rules, render=render)
     fps, per_command = config.sim_fps, config.frames_per_command

@@ -1,6 +1,6 @@
 """One car on one track, one physics frame at a time: vehicle, referee, scoring and cameras.
 
-The timing model (lock-step or real time, two frames in flight) is :mod:`tools.sim.session`'s.
+The timing model (lock-step or real time, two frames in flight) is :mod:`tools.sim.driving.session`'s.
 """
 
 from __future__ import annotations
@@ -12,9 +12,7 @@ import numpy as np
 
 from protocol import SpeedUnit, SteerCommand, encode_telemetry
 from protocol.units import from_kmh
-from tools.sim.cones import place_cones
-from tools.sim.dynamics import make_vehicle
-from tools.sim.rules import (
+from tools.sim.driving.rules import (
     DEFAULT_RULES,
     Cause,
     Intervention,
@@ -25,10 +23,12 @@ from tools.sim.rules import (
     TrackFollower,
     body_hits,
 )
-from tools.sim.scenario import ScenarioConfig, Trace
-from tools.sim.track import SURFACE_KINDS
-from tools.sim.track_file import get_track
-from tools.sim.vehicle import VehicleParams, VehicleState, kmh_to_mps
+from tools.sim.driving.scenario import ScenarioConfig, Trace
+from tools.sim.track.cones import place_cones
+from tools.sim.track.files import get_track
+from tools.sim.track.road import SURFACE_KINDS
+from tools.sim.vehicle.dynamics import make_vehicle
+from tools.sim.vehicle.kinematic import VehicleParams, VehicleState, kmh_to_mps
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +75,8 @@ class Simulation:
         self._trace: list[tuple[float, float, float, float, float, int]] = []
         self.renderer = None
         if render:
-            from tools.sim.render import Renderer
-            from tools.sim.world import get_world  # cached: the textures are built once per process
+            from tools.sim.render.renderer import Renderer
+            from tools.sim.render.world import get_world  # cached: the textures are built once per process
 
             self.renderer = Renderer(get_world(track, config.light_direction_deg,
                                                self.cones if len(self.cones) else None), seed=config.seed)
@@ -171,7 +171,7 @@ class Simulation:
 
     def render(self, camera: str = "center", jitter: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
         """RGB frame (160, 320, 3) of ``camera`` at the car's current pose."""
-        from tools.sim.world import Pose
+        from tools.sim.render.world import Pose
 
         if self.renderer is None:
             raise RuntimeError("this Simulation was created with render=False")

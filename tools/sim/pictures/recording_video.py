@@ -18,8 +18,8 @@ import numpy as np
 from protocol.datalog import read_log
 from protocol.datalog_writer import parse_frame_stamp
 from protocol.facts import MAX_STEERING_DEG
-from tools.sim.text import draw_text
-from tools.sim.video import VideoWriter
+from tools.sim.pictures.text import draw_text
+from tools.sim.pictures.video import VideoWriter
 
 log = logging.getLogger(__name__)
 

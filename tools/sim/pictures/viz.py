@@ -16,10 +16,10 @@ import cv2
 import numpy as np
 
 from protocol.facts import MAX_STEERING_DEG
-from tools.sim.scenario import FrameEvent, RunResult
-from tools.sim.text import draw_text
-from tools.sim.track import Track
-from tools.sim.vehicle import mps_to_kmh
+from tools.sim.driving.scenario import FrameEvent, RunResult
+from tools.sim.pictures.text import draw_text
+from tools.sim.track.road import Track
+from tools.sim.vehicle.kinematic import mps_to_kmh
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ def _draw_road(img: np.ndarray, view: _View, track: Track) -> None:
 
 def write_trajectory_map(result: RunResult, path: str | Path, size: int = 1000) -> Path:
     """Top-down map of the run: road, trajectory coloured by |cross-track error|, interventions, legend."""
-    from tools.sim.track_file import get_track
+    from tools.sim.track.files import get_track
 
     track = get_track(result.config.track)
     trace = result.trace
@@ -270,10 +270,10 @@ class StripCollector:
 
 
 class VideoRecorder:
-    """Writes every telemetry frame, annotated, to a browser-playable H.264 mp4 (see :mod:`tools.sim.video`)."""
+    """Writes every telemetry frame, annotated, to a browser-playable H.264 mp4 (:mod:`tools.sim.pictures.video`)."""
 
     def __init__(self, path: str | Path, fps: float) -> None:
-        from tools.sim.video import VideoWriter
+        from tools.sim.pictures.video import VideoWriter
 
         self.path = Path(path)
         self.fps = fps

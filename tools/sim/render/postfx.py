@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
-from tools.sim.looks import Appearance
+from tools.sim.track.looks import Appearance
 
 NOISE_TILES = 8
 NOISE_UNIT = 16.0  # grey levels of one standard deviation in the stored tiles

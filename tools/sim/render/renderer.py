@@ -1,4 +1,4 @@
-"""The headless renderer: 320x160 RGB frames of a :class:`~tools.sim.world.World` from the car's cameras.
+"""The headless renderer: 320x160 RGB frames of a :class:`~tools.sim.render.world.World` from the car's cameras.
 
 Per frame: the sky is one remap of the panorama, the ground is an affine transform of precomputed
 car-frame ground points followed by one ``cv2.remap`` per mip band, distant rows are blended into the
@@ -14,17 +14,17 @@ import cv2
 import numpy as np
 
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
-from tools.sim.camera import (
+from tools.sim.render.camera import (
     CAMERA_OFFSETS,
     CameraModel,
     camera_models,
     jitter_homography,
     jitter_rotation,
 )
-from tools.sim.postfx import PostFx
-from tools.sim.sky import EL_BOTTOM, EL_TOP, PANO_H, PANO_W, SKY_DIRECT_SHARE
-from tools.sim.sprites import PropPainter
-from tools.sim.world import Pose, World
+from tools.sim.render.postfx import PostFx
+from tools.sim.render.sky import EL_BOTTOM, EL_TOP, PANO_H, PANO_W, SKY_DIRECT_SHARE
+from tools.sim.render.sprites import PropPainter
+from tools.sim.render.world import Pose, World
 
 __all__ = ["CAMERA_OFFSETS", "Pose", "Renderer"]
 

@@ -2,7 +2,7 @@
 
 Bands at signed offsets from the centre line are filled with OpenCV polygons (C++ speed,
 anti-aliased, sub-texel precision). What version-1 tracks use is painted exactly as before; the
-version-2 surfaces (concrete, gravel, worn asphalt) and edge styles (:class:`tools.sim.looks.Edges`)
+version-2 surfaces (concrete, gravel, worn asphalt) and edge styles (:class:`tools.sim.track.looks.Edges`)
 are added around it.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from tools.sim.track import SURFACE_KINDS, Track
+from tools.sim.track.road import SURFACE_KINDS, Track
 
 SHIFT = 4  # sub-texel bits for cv2 drawing
 LINE_W = 0.15  # painted line width, metres

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tools.sim.cones import CONE_HEIGHT, CONE_RADIUS
-from tools.sim.road_paint import DECK_EXTRA, SHIFT, curve_runs, surface_runs
-from tools.sim.texture import GroundAlbedo
-from tools.sim.themes import TREES
-from tools.sim.track import SURFACE_KINDS, Track
+from tools.sim.render.road_paint import DECK_EXTRA, SHIFT, curve_runs, surface_runs
+from tools.sim.render.texture import GroundAlbedo
+from tools.sim.track.cones import CONE_HEIGHT, CONE_RADIUS
+from tools.sim.track.road import SURFACE_KINDS, Track
+from tools.sim.track.themes import TREES
 
 BROADLEAF, CONIFER, BOULDER = 0, 1, 2  # boulders (version-2 themes) are drawn like broadleaf crowns
 RAIL_HEIGHT = 1.0  # metres, top rail of the bridge

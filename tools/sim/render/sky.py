@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 
-from tools.sim.looks import SkySpec
-from tools.sim.scenery import Sun
-from tools.sim.texture import fbm
-from tools.sim.themes import SKIES
+from tools.sim.render.scenery import Sun
+from tools.sim.render.texture import fbm
+from tools.sim.track.looks import SkySpec
+from tools.sim.track.themes import SKIES
 
 PANO_W = 2048  # columns over 360 degrees of azimuth (counter-clockwise from east)
 EL_TOP, EL_BOTTOM = 36.0, -4.0  # degrees covered by the rows

@@ -14,9 +14,8 @@ import cv2
 import numpy as np
 
 from protocol.facts import FRAME_WIDTH
-from tools.sim.camera import CameraModel, fog_weight
-from tools.sim.cones import CONE_HEIGHT, CONE_RADIUS
-from tools.sim.scenery import (
+from tools.sim.render.camera import CameraModel, fog_weight
+from tools.sim.render.scenery import (
     BARRIER_HEIGHT,
     CONIFER,
     RAIL_HEIGHT,
@@ -27,9 +26,10 @@ from tools.sim.scenery import (
     TTINT,
     TTRUNK_R,
 )
-from tools.sim.sky import SKY_DIRECT_SHARE
-from tools.sim.themes import BOULDER_COLOURS, TREES
-from tools.sim.world import World
+from tools.sim.render.sky import SKY_DIRECT_SHARE
+from tools.sim.render.world import World
+from tools.sim.track.cones import CONE_HEIGHT, CONE_RADIUS
+from tools.sim.track.themes import BOULDER_COLOURS, TREES
 
 VIEW_DISTANCE = {theme: t.view_distance for theme, t in TREES.items()}  # metres; further: haze and panorama
 LOD_DIST = 35.0  # beyond this, trees are drawn with fewer shapes

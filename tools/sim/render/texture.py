@@ -3,7 +3,7 @@
 The renderer draws the ground by inverse perspective mapping of this one texture (5 cm per texel by
 default), so everything flat -- lines, kerbs, bridge planks, ponds -- is painted here once per track,
 with OpenCV polygon fills (C++ speed, anti-aliased) rather than per-texel NumPy work. Lighting is
-not applied here: :mod:`tools.sim.world` multiplies this albedo by a light map per sun direction.
+not applied here: :mod:`tools.sim.render.world` multiplies this albedo by a light map per sun direction.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tools.sim.road_paint import SHIFT, paint_road
-from tools.sim.themes import PALETTES
-from tools.sim.track import Track
+from tools.sim.render.road_paint import SHIFT, paint_road
+from tools.sim.track.road import Track
+from tools.sim.track.themes import PALETTES
 
 log = logging.getLogger(__name__)
 
@@ -120,7 +120,7 @@ def paint_ground(track: Track, seed: int | None = None) -> GroundAlbedo:
             centre = tuple(int(v * (1 << SHIFT)) for v in ctr)
             cv2.ellipse(target, centre, axes, -spec.angle_deg, 0, 360, color, -1, cv2.LINE_AA, SHIFT)
 
-    # 3. the road (tools.sim.road_paint)
+    # 3. the road (tools.sim.render.road_paint)
     paint_road(track, img, x0, y1, res, pal, np.random.default_rng([track.appearance.seed, 1]))
 
     # 4. fine grain everywhere (a tiled noise patch; the large-scale colour hides the 25 m period)

@@ -23,10 +23,10 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from tools.sim.scenery import TKIND, TX, TY, Props, Sun, draw_shadows, place_props
-from tools.sim.sky import haze_colour, make_panorama
-from tools.sim.texture import GroundAlbedo, paint_ground
-from tools.sim.track import Track
+from tools.sim.render.scenery import TKIND, TX, TY, Props, Sun, draw_shadows, place_props
+from tools.sim.render.sky import haze_colour, make_panorama
+from tools.sim.render.texture import GroundAlbedo, paint_ground
+from tools.sim.track.road import Track
 
 log = logging.getLogger(__name__)
 

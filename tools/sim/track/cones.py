@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from tools.sim.track import Track
+from tools.sim.track.road import Track
 
 CONE_RADIUS = 0.25  # metres, base radius of the 0.9 m highway cone the renderer draws
 

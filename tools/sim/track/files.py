@@ -1,6 +1,6 @@
-"""The track file format: read, validate and load a JSON track file into a :class:`~tools.sim.track.Track`.
+"""The track file format: read, validate and load a JSON track file into a :class:`~tools.sim.track.road.Track`.
 
-The format is documented in :func:`parse_track`; every problem raises :class:`~tools.sim.track.TrackError`
+The format is documented in :func:`parse_track`; every problem raises :class:`~tools.sim.track.road.TrackError`
 naming the file. Tracks are immutable, so each is loaded once per process (:func:`get_track`).
 """
 
@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 
 from drive_server.runrecords import write_text
-from tools.sim.geometry import closest_overlap
-from tools.sim.spline import resample_loop
-from tools.sim.track import (
+from tools.sim.track.geometry import closest_overlap
+from tools.sim.track.reader import Reader
+from tools.sim.track.road import (
     MIN_TURN_RADIUS,
     SURFACE_KINDS,
     THEMES,
@@ -35,8 +35,8 @@ from tools.sim.track import (
     TreeSpec,
     WaterSpec,
 )
-from tools.sim.track_reader import Reader
-from tools.sim.track_v2 import V2_KEYS, parse_appearance, parse_edges, parse_sky
+from tools.sim.track.spline import resample_loop
+from tools.sim.track.v2 import V2_KEYS, parse_appearance, parse_edges, parse_sky
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +70,8 @@ def write_track_file(path: str | Path, doc: dict[str, Any]) -> Path:
 
 
 def builtin_tracks() -> list[str]:
-    """Names of the tracks shipped in ``tools/sim/tracks``."""
-    folder = resources.files("tools.sim") / "tracks"
+    """Names of the tracks shipped in ``tools/sim/track/builtin``."""
+    folder = resources.files("tools.sim.track") / "builtin"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
 
 
@@ -98,7 +98,7 @@ def load_track(name_or_path: str | Path) -> Track:
         raise TrackError(f"{text}: a generated world is loaded from its file: the rbc commands write it for "
                          f"--track world:SEED (tools.sim.worldgen.resolve_track_name), or write_world({seed}, path)")
     if isinstance(name_or_path, str) and text in builtin_tracks():
-        res = resources.files("tools.sim") / "tracks" / f"{text}.json"
+        res = resources.files("tools.sim.track") / "builtin" / f"{text}.json"
         return _load_text(res.read_text(encoding="utf-8"), f"builtin:{text}")
     path = Path(name_or_path)
     if not path.is_file():
@@ -124,7 +124,7 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
     ([{from_s, to_s, kind}]), ``scenery`` ({theme, trees, poles, water, kerbs}), ``sun``
     ({azimuth_deg, elevation_deg}), ``start`` ({s}) and ``camera_jitter`` ({pitch_deg, roll_deg}) are
     optional. Version 2 adds ``edges``, ``sky`` and ``appearance`` and more surface kinds and themes
-    (:mod:`tools.sim.track_v2`). Every problem raises :class:`TrackError` naming ``source``.
+    (:mod:`tools.sim.track.v2`). Every problem raises :class:`TrackError` naming ``source``.
     """
     r = Reader(source)
     if not isinstance(data, dict):
@@ -217,7 +217,7 @@ def _control_points(raw: Any, r: Reader) -> np.ndarray:
 
 def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: float, r: Reader) -> None:
     """Fail when two stretches of road (shoulders included) overlap or the centre line crosses itself
-    (the rule: :func:`tools.sim.geometry.closest_overlap`, checked on a ~1 m grid)."""
+    (the rule: :func:`tools.sim.track.geometry.closest_overlap`, checked on a ~1 m grid)."""
     step = max(1, int(round(1.0 / (length / len(pts)))))
     p, ss = pts[::step], s[::step]
     hit = closest_overlap(p, ss, length, clearance)

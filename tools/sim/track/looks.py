@@ -1,8 +1,8 @@
 """How a track looks beyond its geometry (track format version 2): road edges, sky and the camera image.
 
 Every default here is what version 1 drew, so a track without these keys renders exactly as before.
-They are parsed by :mod:`tools.sim.track_v2`; the renderer applies them in :mod:`tools.sim.texture`,
-:mod:`tools.sim.sky` and :mod:`tools.sim.postfx`.
+They are parsed by :mod:`tools.sim.track.v2`; the renderer applies them in :mod:`tools.sim.render.texture`,
+:mod:`tools.sim.render.sky` and :mod:`tools.sim.render.postfx`.
 """
 
 from __future__ import annotations

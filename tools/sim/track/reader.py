@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from tools.sim.track import TrackError
+from tools.sim.track.road import TrackError
 
 
 class Reader:

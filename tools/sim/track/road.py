@@ -1,7 +1,7 @@
 """Tracks as data: a closed road, its surfaces and scenery, and the queries the simulator makes of it.
 
-A track file (:mod:`tools.sim.track_file`) gives a handful of centre-line control points; they are
-smoothed and resampled every ~0.5 m (:mod:`tools.sim.spline`). Everything else in the simulator
+A track file (:mod:`tools.sim.track.files`) gives a handful of centre-line control points; they are
+smoothed and resampled every ~0.5 m (:mod:`tools.sim.track.spline`). Everything else in the simulator
 (rendering, rules, autopilot) works on the resampled line, so every query here is an array lookup.
 """
 
@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tools.sim.looks import Appearance, Edges, SkySpec
-from tools.sim.themes import THEMES as THEMES  # re-exported: the track file names themes
-from tools.sim.themes import V1_THEMES as V1_THEMES
+from tools.sim.track.looks import Appearance, Edges, SkySpec
+from tools.sim.track.themes import THEMES as THEMES  # re-exported: the track file names themes
+from tools.sim.track.themes import V1_THEMES as V1_THEMES
 
 log = logging.getLogger(__name__)
 

@@ -1,4 +1,4 @@
-"""Track format version 2: the ``edges``, ``sky`` and ``appearance`` objects (see :mod:`tools.sim.looks`).
+"""Track format version 2: the ``edges``, ``sky`` and ``appearance`` objects (see :mod:`tools.sim.track.looks`).
 
 Version 2 also admits the surface kinds and themes that came with it (concrete, gravel, worn asphalt;
 desert, autumn, snow, rocky, wetland). Each key is optional and defaults to what version 1 draws.
@@ -17,9 +17,18 @@ from __future__ import annotations
 
 from typing import Any
 
-from tools.sim.looks import CENTER_COLORS, LINE_COLORS, LINE_STYLES, VERGES, Appearance, Edges, FrameJitter, SkySpec
-from tools.sim.themes import PALETTES
-from tools.sim.track_reader import Reader
+from tools.sim.track.looks import (
+    CENTER_COLORS,
+    LINE_COLORS,
+    LINE_STYLES,
+    VERGES,
+    Appearance,
+    Edges,
+    FrameJitter,
+    SkySpec,
+)
+from tools.sim.track.reader import Reader
+from tools.sim.track.themes import PALETTES
 
 V2_KEYS = {"edges", "sky", "appearance"}
 

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 
-from tools.sim.vehicle import GRAVITY_MPS2, VEHICLE_KINDS, Vehicle, VehicleParams, VehicleState
+from tools.sim.vehicle.kinematic import GRAVITY_MPS2, VEHICLE_KINDS, Vehicle, VehicleParams, VehicleState
 
 __all__ = ["DynamicVehicle", "brush_lateral_force", "make_vehicle"]
 
@@ -68,7 +68,7 @@ def brush_lateral_force(alpha: float, stiffness: float, f_max: float) -> float:
 
 
 class DynamicVehicle:
-    """Single-track car with tyre slip; the same interface as :class:`tools.sim.vehicle.Vehicle`.
+    """Single-track car with tyre slip; the same interface as :class:`tools.sim.vehicle.kinematic.Vehicle`.
 
     One ``step`` advances one simulation frame (``1 / physics_hz``) by as many ``1 / dynamics_hz``
     integration steps as fall into it. ``friction`` is the tyre-road coefficient under the car; the
@@ -207,7 +207,7 @@ class DynamicVehicle:
 
 
 def make_vehicle(kind: str, state: VehicleState, params: VehicleParams | None = None) -> Vehicle | DynamicVehicle:
-    """The car model ``kind`` (one of :data:`tools.sim.vehicle.VEHICLE_KINDS`) at ``state``."""
+    """The car model ``kind`` (one of :data:`tools.sim.vehicle.kinematic.VEHICLE_KINDS`) at ``state``."""
     if kind == "kinematic":
         return Vehicle(state, params)
     if kind == "dynamic":

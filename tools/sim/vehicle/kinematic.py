@@ -1,5 +1,5 @@
 """Kinematic bicycle model of the simulated car, stepped at a fixed physics rate for determinism, and
-the parameters of the car shared with the dynamic single-track model (:mod:`tools.sim.dynamics`).
+the parameters of the car shared with the dynamic single-track model (:mod:`tools.sim.vehicle.dynamics`).
 
 The Udacity car is a Unity wheel-collider model; at the speeds of the paper (25-45 km/h) on flat
 roads a kinematic bicycle with a first-order longitudinal model reproduces what matters for
@@ -39,7 +39,7 @@ class VehicleParams:
 
     Defaults: a mid-size car like the Udacity one (paper: width 1.9 m). The kinematic model uses the
     geometry, the steering limits, the ``*_mps2`` longitudinal model and the top speed; the dynamic
-    single-track model (:mod:`tools.sim.dynamics`) uses everything but the ``*_mps2`` fields.
+    single-track model (:mod:`tools.sim.vehicle.dynamics`) uses everything but the ``*_mps2`` fields.
     """
 
     wheelbase_m: float = 2.7
@@ -77,7 +77,7 @@ class VehicleParams:
     drag_area_m2: float = 0.65  # Cd x frontal area = 0.30 x 2.2 m^2
     air_density_kg_m3: float = 1.2
     rolling_resistance: float = 0.012  # coefficient (force / weight), radial tyres on asphalt
-    # Peak tyre-road friction per surface kind (tools.sim.track.SURFACE_KINDS; a kind missing here
+    # Peak tyre-road friction per surface kind (tools.sim.track.road.SURFACE_KINDS; a kind missing here
     # gets asphalt's): Wong, Theory of Ground Vehicles, 4th ed., ch. 1, average coefficients of road
     # adhesion (dry asphalt 0.8-0.9, dry concrete 0.8-0.9, dry earth road 0.68, gravel 0.6); the
     # wooden bridge is taken as a wet-asphalt-like 0.7, loose gravel 0.55, worn (polished) asphalt 0.8.

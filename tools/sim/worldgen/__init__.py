@@ -3,6 +3,9 @@
 ``generate_world(seed) -> dict`` is a version-2 track document; ``write_world(seed, path)`` writes it
 as a track file any simulator command loads. Seeds are reserved per purpose (:data:`SEED_RANGES`):
 ``world_seed_range("train")`` and ``world_seed_range("eval")`` never overlap.
+
+May import: ``tools.sim.track``, ``.render``, ``.driving`` (a candidate is driven before it is kept)
+and ``.pictures`` (the contact sheet).
 """
 
 from tools.sim.worldgen.config import (

@@ -6,7 +6,7 @@ import json
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from tools.sim.track import MIN_TURN_RADIUS, THEMES
+from tools.sim.track.road import MIN_TURN_RADIUS, THEMES
 
 #: Seed ranges, half-open [start, stop). Training and evaluation worlds never share a seed, so a
 #: model is never evaluated on a world it was trained on; ``dev`` is for trying things out.

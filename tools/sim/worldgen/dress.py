@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from tools.sim.themes import PALETTES, SKIES
+from tools.sim.track.themes import PALETTES, SKIES
 from tools.sim.worldgen.layout import DS, Layout
 
 COLOURED = ("ground", "ground2", "shoulder", "dirt", "water")  # the rest are greys: little hue change

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocol.facts import COLLECT_SPEED_KMH
-from tools.sim.drivers import AutopilotDriver
-from tools.sim.scenario import ScenarioConfig
-from tools.sim.session import run_scenario
+from tools.sim.driving.drivers import AutopilotDriver
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.session import run_scenario
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.sim.track import Track, TrackError
-from tools.sim.track_file import FORMAT_VERSION, parse_track, world_seed_of, write_track_file
+from tools.sim.track.files import FORMAT_VERSION, parse_track, world_seed_of, write_track_file
+from tools.sim.track.road import Track, TrackError
 from tools.sim.worldgen import dress
 from tools.sim.worldgen.config import GENERATOR_VERSION, WorldGenConfig, seed_range_of
 from tools.sim.worldgen.layout import CONTROL_SPACING_M, DS, make_layout, too_close

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tools.sim.geometry import closest_overlap
+from tools.sim.track.geometry import closest_overlap
 from tools.sim.worldgen.config import WorldGenConfig
 
 DS = 0.5  # metres per sample of the curvature profile

@@ -13,11 +13,11 @@ import cv2
 import numpy as np
 
 from protocol.facts import FRAME_HEIGHT
-from tools.sim.render import Renderer
-from tools.sim.text import draw_text
-from tools.sim.track import Track
-from tools.sim.track_file import parse_track
-from tools.sim.world import Pose, clear_caches, get_world
+from tools.sim.pictures.text import draw_text
+from tools.sim.render.renderer import Renderer
+from tools.sim.render.world import Pose, clear_caches, get_world
+from tools.sim.track.files import parse_track
+from tools.sim.track.road import Track
 from tools.sim.worldgen.config import WorldGenConfig
 from tools.sim.worldgen.generate import DEFAULT_CONFIG, generate_world
 

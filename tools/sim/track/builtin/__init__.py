@@ -1,1 +1,1 @@
-"""Built-in track files (JSON, format version 1); see :mod:`tools.sim.track`."""
+"""Built-in track files (JSON, format version 1); see :mod:`tools.sim.track.road`."""
