@@ -32,7 +32,7 @@ def _hint_for(exc: BaseException) -> str:
     if name == "DataLogError":
         return "give a recording folder with driving_log.csv and IMG/, as rbc collect or the simulator writes"
     if name == "TrackError":
-        return "the track file format is in the README, section The headless simulator"
+        return "the track file format is in docs/formats.md (File formats: Track file)"
     if name in ("ModelError", "ContractError", "ExportError"):
         return "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
     if name in ("RunDirError", "OutputDirError"):

@@ -1,0 +1,107 @@
+"""The generated pages of the documentation site: the command reference and the Python API, from the code.
+
+MkDocs runs this file as a hook (``mkdocs.yml``: ``hooks``). A page holding ``<!-- generated: commands -->``
+gets every ``rbc`` subcommand's and ``drive_server``'s own ``--help`` text, built from the argparse parsers
+the commands use, so the reference cannot drift from the flags; ``<!-- generated: api -->`` gets the
+signatures and docstrings of :data:`API`, the few Python entry points a user scripts against.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import inspect
+import os
+from typing import Any
+
+COMMANDS_MARKER = "<!-- generated: commands -->"
+API_MARKER = "<!-- generated: api -->"
+#: Width of the help texts (argparse wraps to the terminal; the page must not depend on the builder's).
+HELP_COLUMNS = 80
+
+#: The public Python entry points, in the order a user meets them: ``module:name``.
+API: tuple[str, ...] = (
+    "protocol.datalog:read_log",
+    "tools.sim.collect.dataset:CollectConfig",
+    "tools.sim.collect.dataset:collect",
+    "tools.sim.track.files:load_track",
+    "tools.sim.worldgen.generate:generate_world",
+    "tools.sim.worldgen.generate:write_world",
+    "tools.sim.driving.scenario:ScenarioConfig",
+    "tools.sim.driving.session:run_scenario",
+    "models.train_config:TrainConfig",
+    "models.train:train",
+    "drive_server.model:SteeringModel",
+    "drive_server.pipeline:DrivePipeline",
+    "tools.evaluate.suite:run_suite",
+)
+
+
+def _help(parser: Any) -> str:
+    previous = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = str(HELP_COLUMNS)
+    try:
+        return parser.format_help()
+    finally:
+        if previous is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = previous
+
+
+def commands_markdown() -> str:
+    """Each command's ``--help`` as a section; a command whose extra is missing says which one."""
+    from drive_server.cli import build_parser
+    from tools.cli import SUBCOMMANDS, subcommand_parser
+
+    out = ["## drive_server", "", "```text", _help(build_parser()).rstrip(), "```", ""]
+    for cmd in SUBCOMMANDS:
+        out += [f"## rbc {cmd.name}", "", cmd.help + ".", ""]
+        try:
+            module = importlib.import_module(cmd.module)
+        except ModuleNotFoundError as exc:
+            out += [f"(Its help needs the `{cmd.extra or exc.name}` extra installed where the site is built.)", ""]
+            continue
+        out += ["```text", _help(subcommand_parser(cmd, module)).rstrip(), "```", ""]
+    return "\n".join(out)
+
+
+def _entry(path: str) -> str:
+    module_name, name = path.split(":")
+    obj = getattr(importlib.import_module(module_name), name)
+    doc = inspect.getdoc(obj) or ""
+    fields = getattr(obj, "__dataclass_fields__", None) if inspect.isclass(obj) else None
+    lines = [f"## `{name}`", "", f"`{module_name}`", ""]
+    if fields is not None:  # a config: its fields and defaults (the defaults are defined there, once)
+        if doc.startswith(f"{name}("):
+            doc = ""  # the dataclass's generated docstring repeats the signature
+        lines += [doc, "", "| field | type | default |", "|---|---|---|"]
+        for field in fields.values():
+            if field.default is not dataclasses.MISSING:
+                default = f"`{field.default!r}`"
+            elif field.default_factory is not dataclasses.MISSING:
+                default = f"`{field.default_factory.__name__}()`"
+            else:
+                default = "(required)"
+            kind = field.type if isinstance(field.type, str) else getattr(field.type, "__name__", str(field.type))
+            lines.append(f"| `{field.name}` | `{kind.replace(' | ', ' or ')}` | {default} |")
+        return "\n".join([*lines, ""])
+    try:
+        signature = str(inspect.signature(obj))
+    except (TypeError, ValueError):
+        signature = "(...)"
+    kind = "class" if inspect.isclass(obj) else "def"
+    return "\n".join([*lines, "```python", f"{kind} {name}{signature}", "```", "", doc, ""])
+
+
+def api_markdown() -> str:
+    return "\n".join(_entry(path) for path in API)
+
+
+def on_page_markdown(markdown: str, page: Any = None, config: Any = None, files: Any = None) -> str:
+    """MkDocs hook: fill the generated sections of a page."""
+    if COMMANDS_MARKER in markdown:
+        markdown = markdown.replace(COMMANDS_MARKER, commands_markdown())
+    if API_MARKER in markdown:
+        markdown = markdown.replace(API_MARKER, api_markdown())
+    return markdown
