@@ -51,6 +51,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "a browser-playable video of a recording (drive_server --record, rbc collect, Unity)"),
     Subcommand("fuzz", "tools.commands.fuzz",
                "hostile-client campaign against drive_server; healthy latency beside it"),
+    Subcommand("realism", "tools.commands.realism",
+               "image statistics of headless frames against real ones, per band, with a picture"),
     Subcommand("soak", "tools.commands.soak",
                "drive_server for hours under a steady mix of clients: what leaked or drifted (JSON, plot)"),
     Subcommand("replay", "tools.commands.replay",
