@@ -11,7 +11,7 @@ from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 from tools.sim.render.renderer import Renderer
 from tools.sim.render.world import Pose, World, clear_caches, get_world, sun_for
 from tools.sim.track.cones import place_cones
-from tools.sim.track.files import parse_track
+from tools.sim.track.files import load_track, parse_track
 from tools.sim.track.road import Track
 
 STRAIGHT = 160.0  # metres of straight road in the test stadium
@@ -184,3 +184,21 @@ def test_bridge_looks_different_from_asphalt():
     deck, asphalt = road_colour(85.0), road_colour(30.0)
     assert deck[0] - deck[2] > 30  # warm brown planks
     assert abs(asphalt[0] - asphalt[2]) < 15  # neutral grey asphalt
+
+
+def test_the_unity_rig_sees_the_horizon_and_the_bonnet_where_the_real_camera_does():
+    from tools.sim.render.camera import camera_models
+
+    unity, classic = camera_models("unity"), camera_models("classic")
+    assert unity["center"].horizon_row in (64, 65) and classic["center"].horizon_row == 70
+    track = load_track("lake")
+    x, y, h = track.point_at(100.0)
+    frames = Renderer(get_world(track), rig="unity").render_all(Pose(x, y, h))
+    grey = {k: f.mean(axis=2) for k, f in frames.items()}
+    bonnet = np.array([172, 178, 164])
+    assert np.abs(frames["center"][150, 160].astype(int) - bonnet).max() < 20  # the bonnet, mid-frame
+    assert np.abs(frames["center"][130, 160].astype(int) - bonnet).max() > 20  # the road above it
+    assert abs(grey["left"][155, 290] - 170) < 20 and abs(grey["left"][155, 30] - 170) > 20  # moved right
+    assert abs(grey["right"][155, 30] - 170) < 20 and abs(grey["right"][155, 290] - 170) > 20  # and left
+    plain = Renderer(get_world(track)).render(Pose(x, y, h))
+    assert not np.array_equal(plain, frames["center"])

@@ -66,6 +66,16 @@ def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
     return float(m.group(1)), unit
 
 
+def add_camera_argument(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--camera``: which camera rig the headless simulator renders with."""
+    from tools.sim.render.camera import RIGS
+
+    parser.add_argument("--camera", choices=tuple(RIGS), default=default,
+                        help="camera rig: classic (the first headless camera, every table so far) or unity "
+                             "(the real simulator's: horizon at row 64, height 1.40 m, its bonnet from row 137) "
+                             "(default %(default)s)")
+
+
 def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
     """``--vehicle``: which car model the headless simulator drives."""
     from tools.sim.vehicle.kinematic import VEHICLE_KINDS

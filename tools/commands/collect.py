@@ -11,7 +11,7 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-from tools.arguments import add_speed_unit_argument, add_vehicle_argument
+from tools.arguments import add_camera_argument, add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress, bar
 from tools.errors import CommandError
 from tools.sim.collect.backends import BACKENDS
@@ -44,6 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--light-direction", type=float, default=d.light_direction_deg,
                    help="sun direction offset in degrees (default %(default)s)")
     add_vehicle_argument(p, d.vehicle)
+    add_camera_argument(p, d.camera)
     group = p.add_mutually_exclusive_group()
     group.add_argument("--overwrite", action="store_true", help="replace an existing log and IMG/ in --out")
     group.add_argument("--append", action="store_true", help="add rows to an existing log in --out")
@@ -91,7 +92,7 @@ def _config(args: argparse.Namespace) -> CollectConfig:
         track=args.track or CollectConfig.track, laps=args.laps, both_directions=args.both_directions, cones=args.cones,
         cone_seed=args.cone_seed, cameras=args.cameras, rate_hz=args.rate_hz, seed=args.seed,
         speed_kmh=args.speed_kmh, speed_unit=args.speed_unit, light_intensity=args.light_intensity,
-        light_direction_deg=args.light_direction, vehicle=args.vehicle)
+        light_direction_deg=args.light_direction, vehicle=args.vehicle, camera=args.camera)
 
 
 def _worlds(args: argparse.Namespace) -> int:

@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 
 from drive_server.pipeline import DriveConfig
-from tools.arguments import add_speed_unit_argument, add_vehicle_argument
+from tools.arguments import add_camera_argument, add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.errors import CommandError
 from tools.sim.driving.pacing import hooks as on_frame_hooks
@@ -50,6 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
     add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
     add_vehicle_argument(p, d.vehicle)
+    add_camera_argument(p, d.camera)
     p.add_argument("--realtime", action="store_true",
                    help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
     p.add_argument("--control-hz", type=float, default=d.control_hz,
@@ -91,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         light_direction_deg=args.light_direction, cones=args.cones, cone_seed=args.cone_seed, spawn_s=spawn_s,
         yaw_offset_deg=args.yaw_offset, reverse=args.reverse, speed_limit_kmh=args.speed_limit,
         realtime=args.realtime, control_hz=args.control_hz, seed=args.seed, max_lap_time_s=args.max_lap_time,
-        speed_unit=args.speed_unit, vehicle=args.vehicle)
+        speed_unit=args.speed_unit, vehicle=args.vehicle, camera=args.camera)
     if args.server:
         note = "speed limit: the drive server's own (--speed-limit applies to --model only)"
         if args.speed_limit != ScenarioConfig.speed_limit_kmh:

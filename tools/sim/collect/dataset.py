@@ -61,6 +61,7 @@ class CollectConfig:
     light_direction_deg: float = 0.0
     sim_fps: int = 60
     vehicle: str = ScenarioConfig.vehicle  # "kinematic" or "dynamic" (tools.sim.vehicle.dynamics)
+    camera: str = ScenarioConfig.camera  # "classic" or "unity" (tools.sim.render.camera.RIGS)
 
     def __post_init__(self) -> None:
         if self.cameras not in (1, 3):
@@ -163,7 +164,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
                     track=config.track, laps=config.laps, cones=config.cones, cone_seed=config.cone_seed,
                     reverse=reverse, seed=config.seed + k, speed_limit_kmh=config.speed_kmh,
                     light_intensity=config.light_intensity, light_direction_deg=config.light_direction_deg,
-                    sim_fps=config.sim_fps, control_hz=config.sim_fps, vehicle=config.vehicle)
+                    sim_fps=config.sim_fps, control_hz=config.sim_fps, vehicle=config.vehicle, camera=config.camera)
                 sim = Simulation(scenario)
                 pilot = Autopilot(sim.track, sim.direction, sim.cones,
                                   replace(AutopilotParams(), speed_kmh=config.speed_kmh), sim.params,

@@ -43,6 +43,8 @@ class ScenarioConfig:
     speed_unit: str = SpeedUnit.MPH.value  # telemetry speed unit: mph like the stock simulator, or kmh
     # the car: "kinematic" bicycle (no slip) or "dynamic" single-track model with tyre slip (tools.sim.vehicle.dynamics)
     vehicle: str = VEHICLE_KINDS[0]
+    # the cameras: "classic" (the first headless rig) or "unity" (the real simulator's, with its bonnet)
+    camera: str = "classic"
 
     def __post_init__(self) -> None:
         if self.laps < 1:
@@ -62,6 +64,8 @@ class ScenarioConfig:
         SpeedUnit(self.speed_unit)
         if self.vehicle not in VEHICLE_KINDS:
             raise ValueError(f"vehicle must be one of {', '.join(VEHICLE_KINDS)}, got {self.vehicle!r}")
+        if self.camera not in ("classic", "unity"):
+            raise ValueError(f"camera must be classic or unity, got {self.camera!r}")
 
     @property
     def frames_per_command(self) -> int:

@@ -79,7 +79,8 @@ class Simulation:
             from tools.sim.render.world import get_world  # cached: the textures are built once per process
 
             self.renderer = Renderer(get_world(track, config.light_direction_deg,
-                                               self.cones if len(self.cones) else None), seed=config.seed)
+                                               self.cones if len(self.cones) else None), seed=config.seed,
+                                     rig=config.camera)
 
     @property
     def jpeg_quality(self) -> int:

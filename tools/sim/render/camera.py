@@ -9,6 +9,7 @@ them by the car's pose.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -97,8 +98,41 @@ class CameraModel:
         return np.stack([self.cx + self.f * cam_xyz[..., 0] / z, self.cy + self.f * cam_xyz[..., 1] / z], -1)
 
 
-def camera_models() -> dict[str, CameraModel]:
-    return {name: CameraModel(lateral=off) for name, off in CAMERA_OFFSETS.items()}
+@dataclass(frozen=True)
+class CameraRig:
+    """Where the three cameras sit on the car, and whether the car's bonnet is in view."""
+
+    name: str
+    height: float = CAMERA_HEIGHT
+    pitch_deg: float = CAMERA_PITCH_DEG
+    forward: float = CAMERA_FORWARD
+    side_offset: float = CAMERA_OFFSETS["left"]
+    bonnet: bool = False
+
+
+#: The rigs a simulation can use. ``classic``: the first headless camera (every table so far was measured
+#: with it; version-1 tracks render with it byte for byte). ``unity``: the real simulator's camera as
+#: measured on its frames (``tools/drivelog/camera.py``: pitch 6.2 deg so the horizon meets row 64-65,
+#: height 1.40 m, side cameras 0.95 m out) with its bonnet from row 137 (``tools/sim/render/bonnet.py``).
+RIGS: dict[str, CameraRig] = {
+    "classic": CameraRig("classic"),
+    "unity": CameraRig("unity", height=1.40, pitch_deg=-6.2, side_offset=0.95, bonnet=True),
+}
+DEFAULT_RIG = "classic"
+
+
+def camera_rig(name: str) -> CameraRig:
+    try:
+        return RIGS[name]
+    except KeyError:
+        raise ValueError(f"unknown camera rig {name!r}; expected one of {', '.join(RIGS)}") from None
+
+
+def camera_models(rig: str = DEFAULT_RIG) -> dict[str, CameraModel]:
+    r = camera_rig(rig)
+    sides = {"center": 0.0, "left": r.side_offset, "right": -r.side_offset}
+    return {name: CameraModel(lateral=off, height=r.height, forward=r.forward, pitch_deg=r.pitch_deg)
+            for name, off in sides.items()}
 
 
 def jitter_rotation(pitch_deg: float, roll_deg: float) -> np.ndarray:

@@ -14,10 +14,13 @@ import cv2
 import numpy as np
 
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
+from tools.sim.render.bonnet import bonnet_layer, draw_bonnet
 from tools.sim.render.camera import (
     CAMERA_OFFSETS,
+    DEFAULT_RIG,
     CameraModel,
     camera_models,
+    camera_rig,
     jitter_homography,
     jitter_rotation,
 )
@@ -56,11 +59,14 @@ class Renderer:
     seed and the order of the calls).
     """
 
-    def __init__(self, world: World, seed: int = 0) -> None:
+    def __init__(self, world: World, seed: int = 0, rig: str = DEFAULT_RIG) -> None:
         self.world = world
+        self.rig = camera_rig(rig)
         self.postfx = PostFx(world.track.appearance, seed)
         self.props = PropPainter(world)
-        self.cameras = {name: _CameraState(model, world) for name, model in camera_models().items()}
+        self.cameras = {name: _CameraState(model, world) for name, model in camera_models(rig).items()}
+        self._bonnets = ({name: bonnet_layer(state.model.lateral) for name, state in self.cameras.items()}
+                         if self.rig.bonnet else {})
         self._fb = np.empty((FRAME_HEIGHT, FRAME_WIDTH, 4), np.uint8)
         # the panorama with wrapped margins: cv2.remap's BORDER_WRAP path is ~3x slower than a plain lookup
         pano = world.panorama
@@ -120,6 +126,8 @@ class Renderer:
         # props, lit for the intensity and seen by the (jittered) camera, straight onto the RGB frame
         pos = np.array([pose.x + c * m.forward - s * m.lateral, pose.y + s * m.forward + c * m.lateral, m.height])
         self.props.draw(out, m, pos, axes, light_intensity)
+        if self._bonnets:  # fixed to the car: drawn after the bumps' warp, before the camera's processing
+            draw_bonnet(out, self._bonnets[camera], light_intensity)
         return self.postfx.apply(out) if self.postfx.active else out
 
     def render_all(self, pose: Pose, light_intensity: float = 1.0, pitch_deg: float = 0.0,
