@@ -3,7 +3,9 @@
 MkDocs runs this file as a hook (``mkdocs.yml``: ``hooks``). A page holding ``<!-- generated: commands -->``
 gets every ``rbc`` subcommand's and ``drive_server``'s own ``--help`` text, built from the argparse parsers
 the commands use, so the reference cannot drift from the flags; ``<!-- generated: api -->`` gets the
-signatures and docstrings of :data:`API`, the few Python entry points a user scripts against.
+signatures and docstrings of :data:`API`, the few Python entry points a user scripts against; and
+``<!-- generated: readme -->`` (the home page) gets the README, its links made relative to ``docs/``, so
+the front door is written once.
 """
 
 from __future__ import annotations
@@ -12,8 +14,10 @@ import dataclasses
 import importlib
 import inspect
 import os
+from pathlib import Path
 from typing import Any
 
+README_MARKER = "<!-- generated: readme -->"
 COMMANDS_MARKER = "<!-- generated: commands -->"
 API_MARKER = "<!-- generated: api -->"
 #: Width of the help texts (argparse wraps to the terminal; the page must not depend on the builder's).
@@ -98,8 +102,16 @@ def api_markdown() -> str:
     return "\n".join(_entry(path) for path in API)
 
 
+def readme_markdown(readme: Path) -> str:
+    """The README as a page of the site: links into ``docs/`` made relative, the repository's license kept."""
+    return readme.read_text(encoding="utf-8").replace("](docs/", "](")
+
+
 def on_page_markdown(markdown: str, page: Any = None, config: Any = None, files: Any = None) -> str:
     """MkDocs hook: fill the generated sections of a page."""
+    if README_MARKER in markdown:
+        root = Path(config["config_file_path"]).parent if config is not None else Path.cwd()
+        markdown = markdown.replace(README_MARKER, readme_markdown(root / "README.md"))
     if COMMANDS_MARKER in markdown:
         markdown = markdown.replace(COMMANDS_MARKER, commands_markdown())
     if API_MARKER in markdown:
