@@ -28,10 +28,17 @@ def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
     axes[1].set_ylabel("open fds")
     if result.get("fds_start") is not None:
         axes[1].axhline(result["fds_start"], color="grey", ls=":", lw=1, label="before the clients")
-        axes[1].legend(loc="lower right", fontsize=8)
+    if result.get("fds_end") is not None and t:
+        axes[1].plot([t[-1]], [result["fds_end"]], "o", color="tab:green", label="after the clients left")
+        axes[1].legend(loc="center left", fontsize=8)
     lat = axes[2]
-    lat.plot(t, [s["p50_ms"] for s in samples], label="p50", color="tab:purple")
-    lat.plot(t, [s["p99_ms"] for s in samples], label="p99", color="tab:orange")
+    lat.plot(t, [s["p50_ms"] for s in samples], label="p50 (10 s)", color="tab:purple", lw=0.8, alpha=0.6)
+    lat.plot(t, [s["p99_ms"] for s in samples], label="p99 (10 s)", color="tab:orange", lw=0.8, alpha=0.5)
+    minutes = result.get("minutes") or []
+    if minutes:
+        mt = [m["t_s"] / 60 for m in minutes]
+        lat.step(mt, [m["p99_ms"] for m in minutes], where="pre", color="tab:red", lw=1.6,
+                 label=f"p99 per {result['edge_window_s']:g} s")
     lat.set_ylabel("round trip (ms)")
     lat.set_xlabel("minutes")
     lat.set_ylim(bottom=0)
@@ -39,9 +46,12 @@ def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
     for ax in axes:
         ax.grid(alpha=0.3)
     rates = result.get("rates_hz", [])
-    fig.suptitle(f"rbc soak: {result['clients']} simulators at {rates[0]:g}-{rates[-1]:g} Hz, a reconnect loop, "
-                 f"an idle socket, malformed frames, live view, recording; {result['telemetries']:,} telemetries, "
-                 f"{result['unanswered']} unanswered, {result['double_answered']} answered twice", fontsize=9)
+    fig.suptitle(f"rbc soak, {result['duration_s'] / 60:g} min: {result['clients']} simulators at "
+                 f"{rates[0]:g}-{rates[-1]:g} Hz, a reconnect loop, an idle socket, malformed frames, live view, "
+                 f"recording\n{result['telemetries']:,} telemetries: {result['unanswered']} unanswered, "
+                 f"{result['double_answered']} answered twice; RSS {result['rss_mib_start']} -> "
+                 f"{result['rss_mib_end']} MiB after the first minute; fds {result['fds_start']} -> "
+                 f"{result['fds_end']} once the clients left", fontsize=9)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)

@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from tools.wire.server_process import ServerProcess
 
     config = SoakConfig(duration_s=args.duration, clients=args.clients, sample_s=args.sample)
+    version = code_version()  # of the code that runs, not of whatever the checkout holds an hour later
     model = args.model or default_model_path()
     frames = log_frames(DEFAULT_LOG) if DEFAULT_LOG.is_dir() else synthetic_frames(16, seed=config.seed)
     own_dir = args.record_dir is None
@@ -110,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
           f"server exit code {code}, {result['server_tracebacks']} tracebacks")
     print("\n".join(_verdict(result)))
     if args.json is not None:
-        write_json(args.json, {"code_version": code_version(), "seed": config.seed, "config": config.__dict__,
+        write_json(args.json, {"code_version": version, "seed": config.seed, "config": config.__dict__,
                                "model": str(model), "model_sha256": file_sha256(model),
                                "server_args": args.server_args, "result": result})
         print(f"wrote {args.json}")
