@@ -7,7 +7,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
-from drive_server.gates import unsent_bytes
+from drive_server.connections import unsent_bytes
 from drive_server.guard import FrameGuard
 from drive_server.limits import MAX_UNSENT_BYTES
 from drive_server.server_config import RETIRED

@@ -18,13 +18,8 @@ from time import perf_counter
 from typing import Any
 
 from drive_server import listen
-from drive_server.gates import (
-    ConnectionLimiter,
-    limited_websocket_class,
-    polling_gate,
-    protocol_class,
-    shutdown_socket,
-)
+from drive_server.connections import ConnectionLimiter, protocol_class, shutdown_socket
+from drive_server.gates import limited_websocket_class, polling_gate
 from drive_server.guard import FrameGuard
 from drive_server.limits import (
     CLOSE_PROTOCOL_ERROR,

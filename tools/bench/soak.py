@@ -1,16 +1,8 @@
 """``rbc soak``: drive_server under a steady mix for a long time, and what drifted.
 
-The mix, all at once for ``duration_s``: ``clients`` Unity-wire simulators in closed loop on real frames
-at 15-30 Hz (spread evenly), one client that reconnects in a loop, one that upgrades and then says nothing
-(until the server drops it, then again), a trickle of malformed telemetries between good ones, the live
-view's event stream open, and ``--record`` on. Every ``sample_s`` the server's RSS, open fds and the
-window's round-trip p50/p99 are sampled.
-
-Exactly-once is checked the way ``rbc fuzz`` checks it: every 50 frames (and at the end) a client sends a
-null telemetry, which the server answers with ``manual``; a ``steer`` read before that ``manual`` is an
-extra answer (counted ``double_answered``), and a telemetry with no reply within the client timeout is
-``unanswered`` (the client then reconnects). After the run the server is stopped (its recorder flushes)
-and every row of the recording is checked for its image.
+The mix (:mod:`tools.bench.soak_mix`) runs for ``duration_s`` beside ``--record`` on; every ``sample_s``
+the server's RSS, open fds and the window's round-trip p50/p99 are sampled. After the run the server is
+stopped (its recorder flushes) and every row of the recording is checked for its image.
 
 Why threads in one process: the clients send pre-built frames and sleep most of the time (a simulator
 at 30 Hz is idle 97 % of it), and the p99 compared is the first minute's against the last minute's, so a
@@ -20,31 +12,22 @@ constant client cost cancels out.
 from __future__ import annotations
 
 import bisect
-import csv
 import itertools
-import logging
-import threading
 import time
-import urllib.request
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from protocol import SteerCommand
+from protocol.datalog import read_log
 from tools.bench.fuzz import open_fds, rss_mib, settled_fds
+from tools.bench.soak_mix import REPLY_TIMEOUT_S, SoakMix, Tally
 from tools.wire.frames import SourceFrame
-from tools.wire.unity_client import ConnectionClosed, UnityWireClient
+from tools.wire.unity_client import UnityWireClient
 
-log = logging.getLogger("rbc.soak")
+__all__ = ["EDGE_WINDOW_S", "Sample", "Soak", "SoakConfig", "Tally", "check_recording"]
 
-#: A null telemetry: the server answers it with ``manual`` (the sentinel of the exactly-once check).
-SENTINEL = '42["telemetry",null]'
-#: Frames between two sentinels on a driving client.
-SENTINEL_EVERY = 50
-#: Seconds a telemetry may wait for its reply before it counts as unanswered.
-REPLY_TIMEOUT_S = 5.0
 #: Length of the windows whose p99 are compared (the first and the last of the run).
 EDGE_WINDOW_S = 60.0
 
@@ -77,30 +60,6 @@ class SoakConfig:
 
 
 @dataclass
-class Tally:
-    """What one client (or all of them) sent and got back; guarded by the owner's lock when shared."""
-
-    telemetries: int = 0
-    answered: int = 0
-    unanswered: int = 0
-    double_answered: int = 0
-    wrong_kind: int = 0  # a steer where manual was due, or the other way round
-    disconnects: int = 0  # the server closed a driving client's connection (it reconnects)
-    malformed: int = 0
-    reconnects: int = 0
-    idle_sessions: int = 0
-    live_events: int = 0
-    errors: list[str] = field(default_factory=list)
-
-    def add(self, other: Tally) -> None:
-        for name, value in asdict(other).items():
-            if name == "errors":
-                self.errors.extend(other.errors[:20 - len(self.errors)])
-            else:
-                setattr(self, name, getattr(self, name) + value)
-
-
-@dataclass
 class Sample:
     t_s: float
     rss_mib: float | None
@@ -110,126 +69,13 @@ class Sample:
     p99_ms: float | None
 
 
-class Soak:
-    """The clients and the sampler of one soak against the server at ``url`` (process ``pid``)."""
+class Soak(SoakMix):
+    """One soak against the server at ``url`` (process ``pid``): the mix, and the sampler beside it."""
 
     def __init__(self, url: str, pid: int | None, frames: list[SourceFrame], config: SoakConfig) -> None:
-        self.url, self.pid, self.config = url, pid, config
-        self.payloads = [f.payload() for f in frames]
-        self.stop = threading.Event()
-        self.lock = threading.Lock()
-        self.tally = Tally()
-        # per driving client, (seconds since start, round trip s) in time order; appended by its thread only
-        self.rtts: list[list[tuple[float, float]]] = []
+        super().__init__(url, frames, config.malformed_every_s, config.reconnect_every_s)
+        self.pid, self.config = pid, config
         self.samples: list[Sample] = []
-        self.t0 = 0.0
-
-    # -- the clients ------------------------------------------------------------------------------
-    def _sentinel(self, client: UnityWireClient, tally: Tally) -> None:
-        """Send the null telemetry and read up to its ``manual``: every steer before it was an extra answer."""
-        client.send_text(SENTINEL)
-        tally.telemetries += 1
-        while True:
-            reply = client.receive_reply(REPLY_TIMEOUT_S)
-            if reply is None:
-                tally.answered += 1
-                return
-            tally.double_answered += 1
-
-    def _exchange(self, client: UnityWireClient, payload: dict[str, Any] | None, tally: Tally,
-                  expect_steer: bool) -> float | None:
-        tally.telemetries += 1
-        try:
-            reply, rtt = client.exchange(payload)
-        except TimeoutError:
-            tally.unanswered += 1
-            raise
-        tally.answered += 1
-        if isinstance(reply, SteerCommand) != expect_steer:
-            tally.wrong_kind += 1
-        return rtt
-
-    def _reconnecting(self) -> None:
-        tally = Tally()
-        while not self.stop.is_set():
-            try:
-                with UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S) as client:
-                    for k in range(2):
-                        self._exchange(client, self.payloads[k], tally, True)
-                tally.reconnects += 1
-            except (ConnectionClosed, OSError, TimeoutError) as exc:
-                tally.errors.append(f"reconnecting client: {exc}")
-            self.stop.wait(self.config.reconnect_every_s)
-        with self.lock:
-            self.tally.add(tally)
-
-    def _idle(self) -> None:
-        """Upgrade, then send nothing (pings read, never answered) until the server drops the connection
-        (its ping timeout) or the soak ends; then again."""
-        tally = Tally()
-        while not self.stop.is_set():
-            try:
-                client = UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S)
-                client.connect()
-            except (ConnectionError, OSError) as exc:
-                tally.errors.append(f"idle client: {exc}")
-                self.stop.wait(1.0)
-                continue
-            tally.idle_sessions += 1
-            sock = client.socket
-            sock.settimeout(1.0)
-            while not self.stop.is_set():
-                try:
-                    if sock.recv(4096) == b"":  # read (so the kernel's buffer never fills) and never answered
-                        break  # closed by the server
-                except TimeoutError:
-                    continue
-                except OSError:
-                    break
-            client.close()
-        with self.lock:
-            self.tally.add(tally)
-
-    def _malformed(self) -> None:
-        """Between good frames, now and then a telemetry no simulator would send; each must be answered."""
-        tally = Tally()
-        good = self.payloads[0]
-        bad = [dict(good, image="not base64 at all"), dict(good, speed="abc"),
-               {k: v for k, v in good.items() if k != "image"}, dict(good, steering_angle="1_000")]
-        k = 0
-        while not self.stop.is_set():
-            try:
-                with UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S) as client:
-                    while not self.stop.is_set():
-                        self._exchange(client, bad[k % len(bad)], tally, True)  # answered with the fallback
-                        tally.malformed += 1
-                        k += 1
-                        for _ in range(4):  # good frames again (the fallback holds, then the car drives on)
-                            self.stop.wait(self.config.malformed_every_s / 5)
-                            self._exchange(client, good, tally, True)
-            except (ConnectionClosed, OSError, TimeoutError) as exc:
-                tally.disconnects += 1
-                tally.errors.append(f"malformed client: {exc}")
-                self.stop.wait(0.2)
-        with self.lock:
-            self.tally.add(tally)
-
-    def _live_view(self) -> None:
-        tally = Tally()
-        while not self.stop.is_set():
-            try:
-                with urllib.request.urlopen(self.url + "/events", timeout=5) as stream:
-                    while not self.stop.is_set():
-                        line = stream.readline()
-                        if not line:
-                            break
-                        if line.startswith(b"data:"):
-                            tally.live_events += 1
-            except OSError as exc:
-                tally.errors.append(f"live view: {exc}")
-                self.stop.wait(1.0)
-        with self.lock:
-            self.tally.add(tally)
 
     # -- the run ----------------------------------------------------------------------------------
     def run(self, progress: Any = None) -> dict[str, Any]:
@@ -240,10 +86,7 @@ class Soak:
         time.sleep(1.0)  # the warm-up connection's socket is closed
         rss_before, fds_before = rss_mib(self.pid), open_fds(self.pid)
         self.t0 = time.perf_counter()
-        threads = [threading.Thread(target=self._driving, args=(hz, 7 * n), daemon=True)
-                   for n, hz in enumerate(cfg.rates_hz())]
-        threads += [threading.Thread(target=f, daemon=True)
-                    for f in (self._reconnecting, self._idle, self._malformed, self._live_view)]
+        threads = self.threads(cfg.rates_hz())
         for t in threads:
             t.start()
         next_sample = cfg.sample_s
@@ -267,7 +110,7 @@ class Soak:
         edge = min(EDGE_WINDOW_S, cfg.duration_s / 3)
         _, p50_first, p99_first = self._window(0.0, edge)
         _, p50_last, p99_last = self._window(cfg.duration_s - edge, cfg.duration_s)
-        warm = next((s for s in self.samples if s.t_s >= min(EDGE_WINDOW_S, cfg.duration_s / 3)), None)
+        warm = next((s for s in self.samples if s.t_s >= edge), None)
         minutes = []  # the latency per whole window of EDGE_WINDOW_S (a p99 over 10 s is the 9th-worst frame)
         for k in range(int(cfg.duration_s // edge)):
             frames, p50, p99 = self._window(k * edge, (k + 1) * edge)
@@ -299,50 +142,11 @@ class Soak:
         arr = np.asarray(ms) * 1e3
         return int(arr.size), round(float(np.percentile(arr, 50)), 3), round(float(np.percentile(arr, 99)), 3)
 
-    def _driving(self, rate_hz: float, offset: int) -> None:
-        """A simulator in closed loop at ``rate_hz`` on the real frames (from frame ``offset``)."""
-        tally = Tally()
-        rtts: list[tuple[float, float]] = []
-        with self.lock:
-            self.rtts.append(rtts)
-        period = 1.0 / rate_hz
-        i = offset
-        while not self.stop.is_set():
-            try:
-                with UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S) as client:
-                    t_next = time.perf_counter()
-                    while not self.stop.is_set():
-                        sent = time.perf_counter() - self.t0
-                        rtt = self._exchange(client, self.payloads[i % len(self.payloads)], tally, True)
-                        rtts.append((sent, rtt))
-                        i += 1
-                        if i % SENTINEL_EVERY == 0:
-                            self._sentinel(client, tally)
-                        t_next += period
-                        time.sleep(max(0.0, t_next - time.perf_counter()))
-                    self._sentinel(client, tally)
-            except (ConnectionClosed, OSError, TimeoutError) as exc:
-                tally.disconnects += 1
-                tally.errors.append(f"driving client: {exc}")
-                self.stop.wait(0.2)
-        with self.lock:
-            self.tally.add(tally)
-
 
 def check_recording(folder: Path) -> tuple[int, int]:
-    """(rows, rows whose centre image is missing or empty) of a ``--record`` folder."""
-    log_path = folder / "driving_log.csv"
-    if not log_path.is_file():
+    """(rows, rows whose centre image is missing or unreadable) of a ``--record`` folder, as the log reader
+    that training uses sees them."""
+    if not (folder / "driving_log.csv").is_file():
         return 0, 0
-    rows = missing = 0
-    with log_path.open(newline="", encoding="utf-8") as f:
-        for row in csv.reader(f):
-            if not row:
-                continue
-            rows += 1
-            image = Path(row[0].strip())
-            if not image.is_absolute():
-                image = folder / image
-            if not image.is_file() or image.stat().st_size == 0:
-                missing += 1
-    return rows, missing
+    _, report = read_log(folder)
+    return report.rows, sum(1 for s in report.skipped if "image" in s.reason)

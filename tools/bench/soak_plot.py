@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from drive_server.runrecords import atomic_path
+
 
 def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
     """Three stacked panels over minutes of the run; None when matplotlib (extra ``plots``) is missing."""
@@ -53,9 +55,7 @@ def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
                  f"{result['rss_mib_end']} MiB after the first minute; fds {result['fds_start']} -> "
                  f"{result['fds_end']} once the clients left", fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    fig.savefig(tmp, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
-    tmp.replace(path)
     return path

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import shutil
 import tempfile
 from pathlib import Path
@@ -57,8 +58,6 @@ def _verdict(result: dict) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import logging
-
     from drive_server.models_dir import default_model_path
     from tools.bench.soak import Soak
     from tools.bench.soak_plot import plot_soak

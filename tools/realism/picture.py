@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drive_server.runrecords import atomic_path
 from tools.realism.stats import Gap
 
 #: Statistics drawn as histograms (the ones a look change moves most).
@@ -49,9 +50,7 @@ def draw(real: Sequence[np.ndarray], sim: Sequence[np.ndarray], pairs: Sequence[
         if n == 0:
             ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    fig.savefig(tmp, dpi=100)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
-    tmp.replace(path)
     return path

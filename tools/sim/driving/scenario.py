@@ -15,6 +15,7 @@ from tools.sim.driving.rules import (
     LapResult,
     Rules,
 )
+from tools.sim.render.camera import DEFAULT_RIG, camera_rig
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS, VehicleState, kmh_to_mps
 
 
@@ -44,7 +45,7 @@ class ScenarioConfig:
     # the car: "kinematic" bicycle (no slip) or "dynamic" single-track model with tyre slip (tools.sim.vehicle.dynamics)
     vehicle: str = VEHICLE_KINDS[0]
     # the cameras: "classic" (the first headless rig) or "unity" (the real simulator's, with its bonnet)
-    camera: str = "classic"
+    camera: str = DEFAULT_RIG
 
     def __post_init__(self) -> None:
         if self.laps < 1:
@@ -64,8 +65,7 @@ class ScenarioConfig:
         SpeedUnit(self.speed_unit)
         if self.vehicle not in VEHICLE_KINDS:
             raise ValueError(f"vehicle must be one of {', '.join(VEHICLE_KINDS)}, got {self.vehicle!r}")
-        if self.camera not in ("classic", "unity"):
-            raise ValueError(f"camera must be classic or unity, got {self.camera!r}")
+        camera_rig(self.camera)  # an unknown rig is a ValueError naming the known ones
 
     @property
     def frames_per_command(self) -> int:
