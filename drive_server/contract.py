@@ -31,6 +31,8 @@ MAX_SCALE = 1e6
 _COLORS = ("rgb", "yuv", "bgr")
 _LAYOUTS = ("nhwc", "nchw")
 _INTERPOLATIONS = ("area", "linear")
+#: ``decode_reduce`` values: 0 (the serving rule chooses) or one of libjpeg's reduced-size decodes.
+DECODE_REDUCTIONS = (0, 1, 2, 4, 8)
 
 
 class ContractError(ValueError):
@@ -44,6 +46,12 @@ class PreprocessContract:
     Steps, in order: crop rows ``[crop_top, crop_bottom)`` of the full frame, resize to
     ``width`` x ``height`` (``interpolation``), convert to ``color``, then ``x * scale + offset``
     as float32 in ``layout``. The paper's default is 64x64 RGB with x/255 - 0.5.
+    ``decode_reduce``: decode the JPEG at 1/n size (libjpeg's DCT scaling) even where the crop then has
+    fewer rows than the network (half the decode and resize cost); 0: the serving rule chooses
+    (``drive_server.preprocess.jpeg_reduction``: never below the network's resolution).
+    ``blank_columns``: the outer n columns on each side of the network image repeat the next column
+    inward. A model trained on turned views needs it: their missing edge would otherwise tell the
+    network the turn, a cue a real camera never shows (0: off).
     """
 
     width: int = 64
@@ -56,13 +64,15 @@ class PreprocessContract:
     layout: str = "nhwc"
     interpolation: str = "area"
     version: int = CONTRACT_VERSION
+    decode_reduce: int = 0
+    blank_columns: int = 0
 
     def __post_init__(self) -> None:
         # types first: JSON metadata can hold "1", 64.0, null or 1e39 where a number belongs, and each of
         # those used to start the server (or allocate terabytes) instead of being refused here
         if type(self.version) is not int or self.version != CONTRACT_VERSION:
             raise ContractError(f"version must be the integer {CONTRACT_VERSION}, not {self.version!r}")
-        for name in ("width", "height", "crop_top", "crop_bottom"):
+        for name in ("width", "height", "crop_top", "crop_bottom", "decode_reduce", "blank_columns"):
             if type(getattr(self, name)) is not int:
                 raise ContractError(f"{name} must be an integer, not {getattr(self, name)!r}")
         for name in ("scale", "offset"):
@@ -82,6 +92,14 @@ class PreprocessContract:
             raise ContractError(f"interpolation must be one of {_INTERPOLATIONS}, not {self.interpolation!r}")
         if not (0 <= self.crop_top < self.crop_bottom <= FRAME_HEIGHT):
             raise ContractError(f"crop rows [{self.crop_top}, {self.crop_bottom}) outside 0..{FRAME_HEIGHT}")
+        if self.decode_reduce not in DECODE_REDUCTIONS:
+            raise ContractError(f"decode_reduce must be one of {DECODE_REDUCTIONS}, not {self.decode_reduce!r}")
+        if self.decode_reduce and (self.crop_top % self.decode_reduce or self.crop_bottom % self.decode_reduce):
+            raise ContractError(f"crop rows [{self.crop_top}, {self.crop_bottom}) are not on the "
+                                f"1/{self.decode_reduce} decode's grid (both must be multiples of decode_reduce)")
+        if not 0 <= self.blank_columns <= self.width // 4:
+            raise ContractError(f"blank_columns must be 0..{self.width // 4} (a quarter of the width), "
+                                f"not {self.blank_columns}")
         if self.width < 8 or self.height < 8:
             raise ContractError(f"input size {self.width}x{self.height} is too small")
         if self.width > MAX_INPUT_SIDE or self.height > MAX_INPUT_SIDE:
@@ -96,7 +114,11 @@ class PreprocessContract:
         return (1, 3, self.height, self.width)
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), sort_keys=True)
+        data = asdict(self)
+        for key in ("decode_reduce", "blank_columns"):  # off: left out, as in contracts written before the keys
+            if not data[key]:
+                del data[key]
+        return json.dumps(data, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> PreprocessContract:

@@ -22,8 +22,10 @@ def jpeg_reduction(contract: PreprocessContract) -> int:
     Decoding a 320x160 JPEG at half size costs about 60 % of a full decode. The 64x64 input then
     differs from a full-size decode by about 2.7/255 on average (libjpeg's DCT scaling is not an
     exact box filter), which is why training decodes with this same rule: the network is trained
-    on exactly the pixels it is served.
+    on exactly the pixels it is served. A contract's own ``decode_reduce`` overrides the rule.
     """
+    if contract.decode_reduce:
+        return contract.decode_reduce
     crop_h = contract.crop_bottom - contract.crop_top
     for r in (8, 4, 2):
         if FRAME_WIDTH // r >= contract.width and crop_h // r >= contract.height and contract.crop_top % r == 0 \
@@ -49,10 +51,15 @@ def frame_to_network_image(rgb: np.ndarray, contract: PreprocessContract) -> np.
 
 
 def to_input_tensor(images: np.ndarray, contract: PreprocessContract) -> np.ndarray:
-    """Scale/offset a uint8 batch (N, H, W, 3) or one image (H, W, 3) to float32 in the contract's layout."""
+    """Scale/offset a uint8 batch (N, H, W, 3) or one image (H, W, 3) to float32 in the contract's layout
+    (after repeating the edge columns a ``blank_columns`` contract asks for)."""
     if images.ndim == 3:
         images = images[None]
     x = images.astype(np.float32)
+    b = contract.blank_columns
+    if b:  # every input of the network passes here: serving, training batches, validation
+        x[:, :, :b] = x[:, :, b:b + 1]
+        x[:, :, -b:] = x[:, :, -b - 1:-b]
     x *= np.float32(contract.scale)
     x += np.float32(contract.offset)
     if contract.layout == "nchw":

@@ -42,6 +42,14 @@ class AugmentSpec:
     tilt_range_deg: float = 1.0
     shift_range_px: float = 0.0  # full-resolution pixels
     shift_steering_per_px: float = 0.0
+    # not in the paper: the car turned by psi ~ U(-range, range) degrees, what its camera would then see (an
+    # exact homography for a pitched pinhole; camera of the real simulator) and a label that turns back:
+    # theta - gain * psi. The closed loop on real frames needs the heading feedback this teaches (README)
+    yaw: float = 0.0
+    yaw_range_deg: float = 6.0
+    yaw_gain: float = 1.0
+    camera_vfov_deg: float = 60.0  # the Unity camera's vertical field of view (design card)
+    camera_pitch_deg: float = 6.2  # measured on real side cameras (rbc drive-log --calibrate)
 
     @property
     def uses_side_cameras(self) -> bool:
@@ -65,6 +73,8 @@ class AugParams:
     tilt_deg: np.ndarray  # float64
     shift: np.ndarray  # bool
     shift_px: np.ndarray  # float64
+    yaw: np.ndarray | None = None  # bool; None: no sample turned (a spec without the yaw augmentation)
+    yaw_deg: np.ndarray | None = None  # float64, + turned right
 
     def __len__(self) -> int:
         return len(self.camera)
@@ -72,7 +82,12 @@ class AugParams:
     @property
     def geometric(self) -> np.ndarray:
         """Samples that need a warp beyond a mirror."""
-        return self.pan | self.tilt | self.shift
+        return self.pan | self.tilt | self.shift | self.turned
+
+    @property
+    def turned(self) -> np.ndarray:
+        """Samples seen from a turned camera (a projective warp)."""
+        return np.zeros(len(self.camera), bool) if self.yaw is None else self.yaw
 
 
 def correction_angles(theta_rad: np.ndarray | float, gamma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -134,10 +149,17 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
     shift_px = rng.uniform(-spec.shift_range_px, spec.shift_range_px, n)
     label = np.clip(np.where(shift, label + shift_px * spec.shift_steering_per_px, label), -1.0, 1.0)
 
+    yaw = yaw_deg = None
+    if spec.yaw > 0:  # drawn last and only when used, so runs without it consume the generator as before
+        yaw = rng.random(n) < spec.yaw
+        yaw_deg = np.where(yaw, rng.uniform(-spec.yaw_range_deg, spec.yaw_range_deg, n), 0.0)
+        back = -spec.yaw_gain * yaw_deg / MAX_STEERING_DEG  # the turn is drawn before the flip mirrors it
+        label = np.clip(label + np.where(flip, -back, back), -1.0, 1.0) + 0.0
+
     return AugParams(camera=camera, steering=label.astype(np.float32), shadow=shadow, shadow_xy=shadow_xy,
                      brightness=brightness, beta=beta.astype(np.float32), flip=flip, pan=pan,
                      pan_xy=np.where(pan[:, None], pan_xy, 0.0), tilt=tilt, tilt_deg=np.where(tilt, tilt_deg, 0.0),
-                     shift=shift, shift_px=np.where(shift, shift_px, 0.0))
+                     shift=shift, shift_px=np.where(shift, shift_px, 0.0), yaw=yaw, yaw_deg=yaw_deg)
 
 
 # ---- the literal reference, one full-resolution RGB frame at a time (paper section 3.1.4) ----
@@ -193,6 +215,15 @@ def shift(rgb: np.ndarray, tx: float) -> np.ndarray:
     return cv2.warpAffine(rgb, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
+def turn(rgb: np.ndarray, degrees: float, spec: AugmentSpec) -> np.ndarray:
+    """The view of the camera turned ``degrees`` to the right (pure rotation; edge pixels repeated)."""
+    h, w = rgb.shape[:2]
+    pull = geometry.yaw_pullbacks(w, h, np.radians([degrees]), spec.camera_vfov_deg, spec.camera_pitch_deg)[0]
+    index = geometry.translate(-0.5, -0.5) @ pull @ geometry.translate(0.5, 0.5)
+    return cv2.warpPerspective(rgb, index, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                               borderMode=cv2.BORDER_REPLICATE)
+
+
 def augment_reference(frames: dict[str, np.ndarray], params: AugParams, i: int,
                       spec: AugmentSpec) -> tuple[np.ndarray, float]:
     """Sample ``i`` of ``params`` applied literally, step by step, to full-resolution RGB frames.
@@ -205,6 +236,8 @@ def augment_reference(frames: dict[str, np.ndarray], params: AugParams, i: int,
         img = shadows(img, params.shadow_xy[i], spec.shadow_darkness)
     if params.brightness[i]:
         img = brightness(img, float(params.beta[i]), spec.brightness_mode)
+    if params.turned[i]:
+        img = turn(img, float(params.yaw_deg[i]), spec)
     if params.flip[i]:
         img, _ = flip(img, 0.0)
     if params.pan[i]:

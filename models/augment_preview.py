@@ -24,6 +24,8 @@ def describe(params: AugParams, i: int) -> str:
         parts.append("shadow")
     if params.brightness[i]:
         parts.append(f"bright{params.beta[i]:+.2g}")
+    if params.turned[i]:
+        parts.append(f"turn{params.yaw_deg[i]:+.1f}°")
     if params.flip[i]:
         parts.append("flip")
     if params.pan[i]:
@@ -47,6 +49,8 @@ def write_preview(args: argparse.Namespace) -> int:
     from protocol.datalog import read_logs
 
     options = {k: getattr(args, k, None) for k in ("crop_top", "crop_bottom", "brightness_range")}
+    options["decode_reduce"] = getattr(args, "decode_reduce", 0) or 0
+    options |= {k: getattr(args, k) for k in ("yaw_aug", "yaw_range", "yaw_gain") if getattr(args, k, None) is not None}
     pipeline = TrainConfig(data=[], out="", behavior=args.behavior, arch=args.arch, approach=args.approach,
                            brightness_mode=getattr(args, "brightness_mode", None) or "add", **options).pipeline()
     dataset = read_logs(args.data)
@@ -71,7 +75,10 @@ def write_preview(args: argparse.Namespace) -> int:
     for k, s in enumerate(chosen):
         frames = {c: load_frame(getattr(s, c)) for c in cams if getattr(s, c) is not None}
         full, label = augment_reference(frames, params, k, pipeline.augment)
-        net = fast[k]
+        net = fast[k].copy()
+        b = pipeline.contract.blank_columns
+        if b:  # as to_input_tensor does for the network
+            net[:, :b], net[:, -b:] = net[:, b:b + 1], net[:, -b - 1:-b]
         if pipeline.contract.color == "yuv":
             net = cv2.cvtColor(net, cv2.COLOR_YUV2RGB)
         r, c = divmod(k, cols)

@@ -71,14 +71,18 @@ class FastAugmenter:
         return now
 
     def chain(self, params: AugParams, which: np.ndarray) -> np.ndarray:
-        """Pullbacks (k, 3, 3), full-res corner coordinates, of flip, pan, shift and tilt, in that order."""
+        """Pullbacks (k, 3, 3), full-res corner coordinates, of turn, flip, pan, shift and tilt, in that order."""
         n = len(which)
         flip = np.where(params.flip[which, None, None], geometry.flip_pullback(FRAME_WIDTH), np.eye(3))
         pan = geometry.pan_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, params.pan_xy[which, 0], params.pan_xy[which, 1])
         shift = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         shift[:, 0, 2] = -params.shift_px[which]
         tilt = geometry.tilt_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, params.tilt_deg[which])
-        return flip @ pan @ shift @ tilt
+        if params.yaw_deg is None:
+            return flip @ pan @ shift @ tilt
+        turn = geometry.yaw_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, np.radians(params.yaw_deg[which]),
+                                      self.spec.camera_vfov_deg, self.spec.camera_pitch_deg)
+        return turn @ flip @ pan @ shift @ tilt
 
     def images(self, idx: np.ndarray, params: AugParams) -> np.ndarray:
         """Augmented uint8 network images (n, h, w, 3) in the contract's colour."""
@@ -100,24 +104,33 @@ class FastAugmenter:
         if len(warped):
             pulls = self.chain(params, warped) @ self._to_full
             maps = geometry.translate(-0.5, -0.5) @ self._from_full @ pulls @ geometry.translate(0.5, 0.5)
+            turned = params.turned
             for k, i in enumerate(warped):
-                out[i] = cv2.warpAffine(frames[slots[i], idx[i]], maps[k, :2], self.size,
-                                        flags=self.interpolation | cv2.WARP_INVERSE_MAP,
-                                        borderMode=cv2.BORDER_REPLICATE)
+                warp = cv2.warpPerspective if turned[i] else cv2.warpAffine
+                out[i] = warp(frames[slots[i], idx[i]], maps[k] if turned[i] else maps[k, :2], self.size,
+                              flags=self.interpolation | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
             both = np.isin(shadowed, warped)
             to_full[both] = pulls[np.searchsorted(warped, shadowed[both])]
         t = self.lap("pan/tilt warps", t)
         if len(shadowed):
-            self._shadows(out, shadowed, params.shadow_xy[shadowed], np.linalg.inv(to_full))
+            self._shadows(out, shadowed, params.shadow_xy[shadowed], np.linalg.inv(to_full),
+                          params.turned[shadowed])
         t = self.lap("shadows", t)
         self._brightness(out, params)
         self.lap("brightness", t)
         return out
 
-    def _shadows(self, out: np.ndarray, which: np.ndarray, quads: np.ndarray, forward: np.ndarray) -> None:
-        """Darken the quadrilaterals, mapped to output coordinates and drawn anti-aliased (partial coverage)."""
+    def _shadows(self, out: np.ndarray, which: np.ndarray, quads: np.ndarray, forward: np.ndarray,
+                 projective: np.ndarray) -> None:
+        """Darken the quadrilaterals, mapped to output coordinates and drawn anti-aliased (partial coverage).
+
+        ``projective``: samples whose map is a homography (a turned camera), the others' maps are affine."""
         # vertices are pixel indices at full resolution: their centres are at +0.5 in corner coordinates
         pts = np.einsum("kij,kqvj->kqvi", forward[:, :2, :2], quads + 0.5) + forward[:, None, None, :2, 2] - 0.5
+        if projective.any():  # a straight edge stays straight under a homography: mapping the vertices is exact
+            homog = np.einsum("kij,kqvj->kqvi", forward[projective], np.concatenate(
+                [quads[projective] + 0.5, np.ones(quads[projective].shape[:-1] + (1,))], axis=-1))
+            pts[projective] = homog[..., :2] / homog[..., 2:] - 0.5
         fixed = np.rint(pts * (1 << _SUBPIXEL_BITS)).astype(np.int32)
         strength = 1.0 - self.spec.shadow_darkness
         mask = np.empty((self.contract.height, self.contract.width, 3), np.uint8)

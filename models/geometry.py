@@ -161,3 +161,23 @@ def tilt_pullbacks(width: int, height: int, degrees: np.ndarray) -> np.ndarray:
     crop[:, 0, 0], crop[:, 0, 2] = (x1 - x0) / width, x0
     crop[:, 1, 1], crop[:, 1, 2] = (y1 - y0) / height, y0
     return rotate @ crop
+
+
+def yaw_pullbacks(width: int, height: int, yaw_rad: np.ndarray, vfov_deg: float, pitch_deg: float) -> np.ndarray:
+    """What a pitched pinhole camera sees when the car turns by ``yaw_rad`` (+ right) about the vertical.
+
+    A pure rotation of the camera is an exact homography for everything in view, near or far (no depth
+    needed): ``K R_pitch R_yaw R_pitch^T K^-1`` from a pixel of the turned view to the recorded frame,
+    the same map as the closed loop's view synthesis above the horizon (``tools.drivelog.camera``).
+    Returned as pullbacks in corner coordinates, like every map here (``(n, 3, 3)``, projective).
+    """
+    f = (height / 2) / math.tan(math.radians(vfov_deg / 2))
+    k = np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
+    c, s = math.cos(math.radians(pitch_deg)), math.sin(math.radians(pitch_deg))
+    pitch = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    a = np.asarray(yaw_rad, float)
+    yaw = _stack(len(a))
+    yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 2, 0], yaw[:, 2, 2] = np.cos(a), np.sin(a), -np.sin(a), np.cos(a)
+    # index coordinates (pixel centres at integers) -> corner coordinates: +0.5
+    rotate = k @ pitch @ yaw @ pitch.T @ np.linalg.inv(k)
+    return translate(0.5, 0.5) @ rotate @ translate(-0.5, -0.5)

@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from drive_server.contract import ContractError
+import numpy as np
+
+from drive_server.contract import ContractError, PreprocessContract
+from models import geometry
+from models.augment import AugmentSpec
 from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipeline, pipeline_for
 from models.split import SplitSpec
 from models.trainingdata import DataOptions
+from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
 #: Lateral offset of the side cameras from the centre one, metres (the design card; Eq. 4/5's numerator).
 SIDE_CAMERA_OFFSET_M = 0.95
@@ -16,6 +22,27 @@ SIDE_CAMERA_OFFSET_M = 0.95
 SCALE_BRIGHTNESS_RANGE = 0.5
 #: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
 LEGACY = {"split": "random", "export": "last"}
+
+
+def turned_edge_columns(augment: AugmentSpec, contract: PreprocessContract) -> int:
+    """Network columns that a turn of up to ``yaw_range_deg`` leaves without picture, plus one: blanked on both
+    sides of every input, so the network cannot read the turn from the missing edge (the closed loop's views
+    have that edge too, so a model that did would score there what it could not do in Unity). The camera's
+    wide angle makes the edges move most: a 6 degree turn leaves 30 of 320 columns at the edge empty."""
+    ys = np.arange(contract.crop_top, contract.crop_bottom + 1, dtype=np.float64)
+    xs = np.arange(0.0, FRAME_WIDTH / 2 + 1)
+    worst = 0.0
+    for sign in (-1.0, 1.0):
+        pull = geometry.yaw_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, np.radians([sign * augment.yaw_range_deg]),
+                                      augment.camera_vfov_deg, augment.camera_pitch_deg)[0]
+        for x in (xs, FRAME_WIDTH - xs):  # inward from the left edge, and from the right one
+            gx, gy = np.meshgrid(x, ys)
+            src = pull @ np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+            src_x = src[0] / src[2]
+            outside = (src_x < 0) | (src_x > FRAME_WIDTH)
+            if outside.any():
+                worst = max(worst, float(np.abs(gx.ravel()[outside] - (x[0])).max()))
+    return min(contract.width // 4, math.ceil(worst * contract.width / FRAME_WIDTH) + 1)
 
 
 @dataclass
@@ -40,6 +67,7 @@ class TrainConfig:
     export: str = "best"  # "best": the epoch with the lowest validation MSE; "last": the final epoch
     crop_top: int | None = None  # rows of the 320x160 frame; None: the approach's (0 ours, 60 nvidia)
     crop_bottom: int | None = None
+    decode_reduce: int = 0  # decode frames at 1/n size (0: the serving rule's choice; in the model's contract)
     brightness_mode: str = "add"  # "add": the paper's p + beta; "scale": p * (1 + beta), relative to the frame
     brightness_range: float | None = None  # None: 100 (add, the paper's), 50 (nvidia), 0.5 (scale)
     min_speed: float = 0.0  # rows recorded slower than this are dropped (0: keep all)
@@ -53,6 +81,11 @@ class TrainConfig:
     # side-camera label correction: the distance (m) in which a car 0.95 m off would be back (Eq. 4/5: gamma =
     # 0.95 / this); None: the paper's 10 m. Shorter teaches a stronger pull back to the centre line
     recovery_distance: float | None = None
+    # not in the paper: the share of samples seen from the car turned by up to yaw_range degrees, labelled to
+    # turn back (theta - yaw_gain * psi): the heading feedback a closed loop needs (0: off, the paper's)
+    yaw_aug: float = 0.0
+    yaw_range: float = 6.0
+    yaw_gain: float = 1.0
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -67,6 +100,12 @@ class TrainConfig:
             self.split = "recordings"
         if self.recovery_distance is not None and not 1.0 <= self.recovery_distance <= 100.0:
             raise ValueError(f"recovery distance must be 1..100 m, got {self.recovery_distance}")
+        if not 0.0 <= self.yaw_aug <= 1.0:
+            raise ValueError(f"yaw augmentation share must be 0..1, got {self.yaw_aug}")
+        if not 0.0 < self.yaw_range <= 30.0:
+            raise ValueError(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
+        if not 0.0 <= self.yaw_gain <= 5.0:
+            raise ValueError(f"yaw gain must be 0..5, got {self.yaw_gain}")
         if not 0 <= self.label_lag <= 100:
             raise ValueError(f"label lag must be 0..100 frames, got {self.label_lag}")
         if not 1 <= self.row_stride <= 1000:
@@ -99,11 +138,15 @@ class TrainConfig:
         """The behavior's pipeline with this run's crop and brightness settings applied."""
         p = pipeline_for(self.behavior, self.arch, self.approach)
         contract = replace(p.contract, crop_top=p.contract.crop_top if self.crop_top is None else self.crop_top,
-                           crop_bottom=p.contract.crop_bottom if self.crop_bottom is None else self.crop_bottom)
+                           crop_bottom=p.contract.crop_bottom if self.crop_bottom is None else self.crop_bottom,
+                           decode_reduce=self.decode_reduce)
         brightness_range = self.brightness_range
         if brightness_range is None:
             brightness_range = SCALE_BRIGHTNESS_RANGE if self.brightness_mode == "scale" else p.augment.brightness_range
         augment = replace(p.augment, brightness_mode=self.brightness_mode, brightness_range=brightness_range)
         if self.recovery_distance is not None:
             augment = replace(augment, gamma=SIDE_CAMERA_OFFSET_M / self.recovery_distance)
+        if self.yaw_aug > 0:
+            augment = replace(augment, yaw=self.yaw_aug, yaw_range_deg=self.yaw_range, yaw_gain=self.yaw_gain)
+            contract = replace(contract, blank_columns=turned_edge_columns(augment, contract))
         return replace(p, contract=contract, augment=augment)

@@ -92,6 +92,22 @@ def test_yuv_crop_path_of_nvidia_contract():
     np.testing.assert_allclose(x[0, 0], expected[..., 0] / 255.0, atol=1e-6)  # Y plane first, x/255
 
 
+def test_a_contract_can_ask_for_a_reduced_decode():
+    half = replace(PAPER_CONTRACT, crop_top=64, crop_bottom=136, decode_reduce=2)
+    assert jpeg_reduction(replace(half, decode_reduce=0)) == 1  # 72 rows: the rule keeps the full decode
+    assert jpeg_reduction(half) == 2
+    assert PreprocessContract.from_json(half.to_json()) == half
+    assert "decode_reduce" not in PAPER_CONTRACT.to_json()  # contracts without it read as they always did
+    for bad in (3, -2, 2.0, "2", None):
+        with pytest.raises(ContractError, match="decode_reduce"):
+            replace(half, decode_reduce=bad)
+    with pytest.raises(ContractError, match="grid"):
+        replace(half, crop_top=65)
+    # the served pixels: the 36 decoded rows resized to the network's 64, as training sees them
+    rgb = np.random.default_rng(0).integers(0, 255, (80, 160, 3), dtype=np.uint8)
+    assert frame_to_network_image(rgb, half).shape == (64, 64, 3)
+
+
 def test_jpeg_reduction():
     assert jpeg_reduction(PAPER_CONTRACT) == 2  # 160x80 decode still >= 64x64
     assert jpeg_reduction(NVIDIA_CONTRACT) == 1  # 200 wide needs the full 320

@@ -100,3 +100,19 @@ def test_a_shorter_recovery_distance_pulls_side_frames_back_harder() -> None:
         assert left * 25 == pytest.approx(expected_deg, abs=0.01) and right == pytest.approx(-left)
     with pytest.raises(ValueError, match="recovery distance"):
         TrainConfig(data=["x"], out="y", recovery_distance=0.5)
+
+
+def test_the_turned_camera_and_reduced_decode_reach_the_pipeline() -> None:
+    from models.train_config import TrainConfig
+
+    paper = TrainConfig(data=["x"], out="y").pipeline()
+    assert paper.augment.yaw == 0.0 and paper.contract.decode_reduce == 0  # off unless asked for: the paper's
+    p = TrainConfig(data=["x"], out="y", yaw_aug=0.5, yaw_gain=2.0, yaw_range=10.0, crop_top=64, crop_bottom=136,
+                    decode_reduce=2).pipeline()
+    assert (p.augment.yaw, p.augment.yaw_gain, p.augment.yaw_range_deg) == (0.5, 2.0, 10.0)
+    assert p.contract.decode_reduce == 2
+    for bad in ({"yaw_aug": 1.5}, {"yaw_range": 0.0}, {"yaw_gain": -1.0}):
+        with pytest.raises(ValueError, match="yaw"):
+            TrainConfig(data=["x"], out="y", **bad)
+    with pytest.raises(ValueError, match="decode"):  # 65 is not on the half-size grid
+        TrainConfig(data=["x"], out="y", crop_top=65, decode_reduce=2)

@@ -42,6 +42,11 @@ def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--crop-bottom", type=int, default=TrainConfig.crop_bottom, metavar="ROW",
                         help="row after the last one the network sees (default: the approach's, 160; with the "
                              f"bonnet in view: {BONNET_CROP[1]})")
+    parser.add_argument("--decode-reduce", type=int, choices=(0, 1, 2, 4, 8), default=TrainConfig.decode_reduce,
+                        metavar="N", help="decode camera frames at 1/N size, in training and in the drive server (the "
+                        "model's contract says so): 2 halves the decode and resize cost even where the crop then has "
+                        "fewer rows than the network; 0: the largest that keeps the network's resolution "
+                        "(default %(default)s)")
     parser.add_argument("--brightness-mode", choices=("add", "scale"), default=TrainConfig.brightness_mode,
                         help="add: the paper's p + beta (grey levels); scale: p * (1 + beta), relative to the frame's "
                              "own brightness, so dark frames are not blacked out")
@@ -52,7 +57,8 @@ def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
 
 def preprocess_options(args: argparse.Namespace) -> dict:
     """The ``TrainConfig`` fields set by :func:`add_preprocess_arguments`."""
-    return {k: getattr(args, k) for k in ("crop_top", "crop_bottom", "brightness_mode", "brightness_range")}
+    return {k: getattr(args, k) for k in ("crop_top", "crop_bottom", "decode_reduce", "brightness_mode",
+                                          "brightness_range")}
 
 
 def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
@@ -83,3 +89,18 @@ def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
     parser.add_argument("--vehicle", choices=VEHICLE_KINDS, default=default,
                         help="car model: dynamic single-track with tyre slip, or the kinematic bicycle "
                              "(default %(default)s)")
+
+
+def add_yaw_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--yaw-aug/--yaw-range/--yaw-gain``: the turned-camera augmentation (rbc train, rbc augment-preview)."""
+    from models.train_config import TrainConfig
+
+    parser.add_argument("--yaw-aug", type=float, default=TrainConfig.yaw_aug, metavar="P",
+                        help="share of samples seen from the car turned by psi ~ U(-R, R) degrees (an exact "
+                             "re-projection for the real simulator's camera), labelled theta - G psi: teaches the "
+                             "heading feedback a closed loop needs; not in the paper (default %(default)s: off)")
+    parser.add_argument("--yaw-range", type=float, default=TrainConfig.yaw_range, metavar="R",
+                        help="largest turn of --yaw-aug, degrees (default %(default)s)")
+    parser.add_argument("--yaw-gain", type=float, default=TrainConfig.yaw_gain, metavar="G",
+                        help="how much of a turn --yaw-aug's label steers back at once (default %(default)s: "
+                             "all of it, aiming along the road again)")

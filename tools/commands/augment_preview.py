@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tools.arguments import add_pipeline_arguments, add_preprocess_arguments
+from tools.arguments import add_pipeline_arguments, add_preprocess_arguments, add_yaw_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", required=True, metavar="DIR", help="recording directory or log")
     add_pipeline_arguments(parser)
     add_preprocess_arguments(parser)
+    add_yaw_arguments(parser)
     parser.add_argument("--out", required=True, type=Path, help="PNG file to write")
     parser.add_argument("--n", type=int, default=16, help="number of samples")
     parser.add_argument("--seed", type=int, default=0, help="which samples and augmentations are drawn")

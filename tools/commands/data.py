@@ -1,4 +1,4 @@
-"""``rbc data stats|clean|fetch``: real Udacity-simulator recordings, in the spirit of DonkeyCar's tub tools.
+"""``rbc data``: real Udacity-simulator recordings, in the spirit of DonkeyCar's tub tools.
 
 ``stats`` says what a recording holds before it is trained on, ``clean`` writes a log of the rows worth
 keeping (pointing at the source frames, copying none), ``fetch`` gets the public recordings of the
@@ -19,7 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
                                 help="stats: a table per recording; clean: a cleaned log; fetch: the public "
                                      "recordings; "
-                                     "fold: rbc train arguments holding one fold of them out")
+                                     "fold: rbc train arguments holding one fold of them out; crossval: each "
+                                     "recording scored by the model its fold was held out of")
     formatter = parser.formatter_class
     stats = sub.add_parser("stats", formatter_class=formatter, help="one line of figures per recording, and a total",
                            description="rows, frames, frame rate, sessions, steering, speed, duplicates and "
@@ -66,13 +67,75 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fold.add_argument("--root", default="real", metavar="DIR", help="where rbc data fetch put the recordings")
 
 
+    cv = sub.add_parser("crossval", formatter_class=formatter, help="score each recording with its fold's model",
+                        description="each public recording scored by the model trained without its fold: open loop "
+                                    "(every row, centre camera) and, on lake, closed loop (rbc drive-log); prints "
+                                    "the per-track summary and one row per recording as markdown")
+    cv.add_argument("--root", type=Path, default=Path("real"), metavar="DIR",
+                    help="where rbc data fetch put the recordings (default %(default)s)")
+    cv.add_argument("--models", required=True, metavar="PATTERN",
+                    help="the fold models, with {fold} for the fold's letter, e.g. runs/cv-{fold}/model.onnx")
+    cv.add_argument("--peer", default=None, metavar="MODEL",
+                    help="also score this model (trained elsewhere) on every recording, beside the folds' models")
+    cv.add_argument("--track", choices=TRACKS, default=None, help="only the recordings of this track")
+    cv.add_argument("--name", action="append", default=None, metavar="NAME", help="only this recording (repeat)")
+    cv.add_argument("--no-closed-loop", action="store_true", help="open loop only (minutes instead of ~10)")
+    cv.add_argument("--max-offset", type=float, default=1.0, metavar="M",
+                    help="metres off the recorded path at which a person takes over, as rbc drive-log "
+                         "(default %(default)s)")
+    cv.add_argument("--workers", type=int, default=2, help="recordings scored at once (default %(default)s)")
+    cv.add_argument("--json", type=Path, default=None, metavar="OUT", help="also write every score as JSON")
+
+
 def _session_gap(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--session-gap", type=float, default=1.0, metavar="S",
                         help="a jump of the frame time stamps by more than S seconds starts a new session")
 
 
 def run(args: argparse.Namespace) -> int:
-    return {"stats": _stats, "clean": _clean, "fetch": _fetch, "fold": _fold}[args.action](args)
+    return {"stats": _stats, "clean": _clean, "fetch": _fetch, "fold": _fold, "crossval": _crossval}[args.action](args)
+
+
+def _crossval(args: argparse.Namespace) -> int:
+    from drive_server.runrecords import code_version, write_json
+    from tools.console import Progress
+    from tools.errors import CommandError
+    from tools.realdata.crossval import FOLD_FIELD, format_tables, model_for, score_all, summarise
+    from tools.realdata.recordings import public_recordings, select
+
+    recs = select(public_recordings(), args.track, args.name)
+    if not recs:
+        raise CommandError("no public recording among those named")
+    if not 1 <= args.workers <= 64 or not 0.05 <= args.max_offset <= 10:
+        raise CommandError("--workers must be 1..64 and --max-offset 0.05..10 metres")
+    missing = [str(p) for p in {model_for(args.models, r) for r in recs} | ({Path(args.peer)} if args.peer else set())
+               if not p.is_file()]
+    absent = [r.name for r in recs if not (args.root / r.name / "driving_log.csv").is_file()]
+    if missing:
+        raise CommandError(f"no model at {', '.join(sorted(missing))}",
+                           f"train one per fold ({FOLD_FIELD} in --models): rbc train $(rbc data fold F --root ...)")
+    if absent:
+        raise CommandError(f"{len(absent)} recordings not under {args.root}, first {absent[0]}",
+                           f"rbc data fetch --out {args.root}")
+    closed = not args.no_closed_loop
+    runs = [("folds", args.models)] + ([("peer", args.peer)] if args.peer else [])
+    results = {}
+    for what, pattern in runs:
+        progress = Progress(f"crossval {what}", unit="recording")
+        try:
+            results[what] = score_all(recs, args.root, pattern, closed, args.max_offset, args.workers,
+                                      on_done=progress)
+        finally:
+            progress.close()
+    print(format_tables(results["folds"], results.get("peer", ())))
+    if args.json:
+        write_json(args.json, {"code_version": code_version(), "root": str(args.root), "models": args.models,
+                               "peer": args.peer, "closed_loop": closed, "max_offset_m": args.max_offset,
+                               **{what: {"recordings": [s.as_dict() for s in scores],
+                                         "tracks": [t.__dict__ for t in summarise(scores)]}
+                                  for what, scores in results.items()}})
+        print(f"json  {args.json}")
+    return 0
 
 
 def _fold(args: argparse.Namespace) -> int:

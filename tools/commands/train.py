@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from models.train_config import TrainConfig
-from tools.arguments import add_pipeline_arguments, add_preprocess_arguments, parse_speed
+from tools.arguments import add_pipeline_arguments, add_preprocess_arguments, add_yaw_arguments, parse_speed
 from tools.errors import CommandError
 
 
@@ -36,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--recovery-distance", type=float, default=TrainConfig.recovery_distance, metavar="M",
                         help="side-camera labels steer a car 0.95 m off back within M metres (Eq. 4/5, gamma = "
                              "0.95 / M; default: the paper's 10); shorter teaches a stronger pull to the centre line")
+    add_yaw_arguments(parser)
     parser.add_argument("--label-lag", type=int, default=TrainConfig.label_lag, metavar="N",
                         help="label each frame with the steering recorded N frames later (drivers steer a few "
                              "frames after the picture that calls for it); 0: as recorded")
@@ -82,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
                          export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
                          smooth_labels=args.smooth_labels, row_stride=args.row_stride, val_data=args.val_data,
                          balance_recordings=args.balance_recordings, label_lag=args.label_lag,
-                         recovery_distance=args.recovery_distance,
+                         recovery_distance=args.recovery_distance, yaw_aug=args.yaw_aug, yaw_range=args.yaw_range,
+                         yaw_gain=args.yaw_gain,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
     if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)

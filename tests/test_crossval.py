@@ -1,0 +1,64 @@
+"""rbc data crossval: each recording scored by its fold's model, open and closed loop, as one table."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tools.realdata.crossval import RecordingScore, format_tables, model_for, score_recording, summarise
+from tools.realdata.recordings import PublicRecording
+
+DATA = Path(__file__).parent / "data"
+MODEL = Path(__file__).parents[1] / "models" / "pretrained" / "unity.onnx"
+
+
+def _rec(name: str = "udacity-sample", track: str = "lake", fold: str = "B") -> PublicRecording:
+    return PublicRecording(name=name, track=track, repository="a/b", commit="0" * 40, folder="", rows=None,
+                           input="keyboard", fold=fold)
+
+
+def test_the_model_is_the_one_of_the_recordings_fold() -> None:
+    assert model_for("runs/cv-{fold}/model.onnx", _rec(fold="C")) == Path("runs/cv-C/model.onnx")
+    assert model_for("one.onnx", _rec(fold="C")) == Path("one.onnx")
+
+
+def test_a_lake_recording_is_scored_open_and_closed_loop() -> None:
+    s = score_recording(_rec(), DATA, MODEL)
+    assert s.frames == 36 and s.zero_mse > 0 and -1 <= s.pearson_r <= 1
+    assert s.eta is not None and 0 <= s.eta <= 100 and s.interventions >= 0 and s.seconds_per_takeover > 0
+    jungle = score_recording(_rec(track="jungle"), DATA, MODEL)  # hills: not re-projected over flat ground
+    assert jungle.eta is None and jungle.mse == s.mse
+
+
+def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
+    scores = [RecordingScore("a", "lake", "A", "m", 10, 0.05, 0.04, 0.5, 20.0, 3, 8.0),
+              RecordingScore("b", "lake", "B", "m", 10, 0.02, 0.03, 0.3, 40.0, 1, 12.0),
+              RecordingScore("c", "jungle", "A", "m", 10, 0.2, 0.1, 0.6)]
+    lake, jungle = summarise(scores)
+    assert (lake.recordings, lake.mean_r, lake.beats_zero, lake.mean_eta) == (2, 0.4, 1, 30.0)
+    assert jungle.mean_eta is None and jungle.beats_zero == 1
+    text = format_tables(scores, peer=scores[:1])
+    assert "| lake | 2 | 0.40 | 1 of 2 | 30.0 | 10.0 | 0.50 | 1 of 1 | 20.0 | 8.0 |" in text
+    assert "| a | lake | A | 10 | 0.0500 | **0.0400** | 0.50 | 20.0 (3; 8.0 s) | **0.0400** |" in text
+    assert "| b | lake | B | 10 | 0.0200 | 0.0300 |" in text  # not bold: always-0 is better
+    assert "| jungle | 1 | 0.60 | 1 of 1 | – | – | – | – | – | – |" in text
+
+
+def test_the_command_names_a_missing_fold_model_in_one_line(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "tools.cli", "data", "crossval", "--root", str(tmp_path),
+                          "--models", str(tmp_path / "cv-{fold}.onnx"), "--name", "0xR4Y"],
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert f"no model at {tmp_path / 'cv-A.onnx'}" in out.stderr
+
+
+@pytest.mark.parametrize("flag", [["--workers", "0"], ["--max-offset", "0"]])
+def test_bad_settings_are_refused(tmp_path: Path, flag: list[str]) -> None:
+    out = subprocess.run([sys.executable, "-m", "tools.cli", "data", "crossval", "--models", str(MODEL),
+                          "--name", "0xR4Y", *flag], capture_output=True, text=True)
+    assert out.returncode == 2 and "must be" in out.stderr and "Traceback" not in out.stderr
+    assert not json.dumps(out.stdout).count("|")

@@ -1,0 +1,170 @@
+"""Cross-validation by driver: every public recording scored by the model its fold was held out of.
+
+The manifest puts each recording in a fold (one driver's recordings share one); a model trained on the
+other folds scores it open loop (every row, centre camera, against the recorded steering and against
+always-0) and, on the lake track, closed loop (``rbc drive-log``). What a new driver's data looks like
+to the recipe, as one table: the README's and the model card's figures come from here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tools.realdata.recordings import PublicRecording
+
+#: The placeholder of ``--models`` that becomes each recording's fold.
+FOLD_FIELD = "{fold}"
+#: Tracks whose recordings are also driven closed loop (the re-projection assumes flat ground: the jungle
+#: and mountain tracks climb and fall, so their views would be wrong).
+CLOSED_LOOP_TRACKS = ("lake",)
+
+
+@dataclass(frozen=True)
+class RecordingScore:
+    """One recording under one model. ``eta`` and the take-over figures are None where not driven."""
+
+    name: str
+    track: str
+    fold: str
+    model: str
+    frames: int
+    zero_mse: float
+    mse: float
+    pearson_r: float
+    eta: float | None = None
+    interventions: int | None = None
+    seconds_per_takeover: float | None = None
+
+    @property
+    def beats_zero(self) -> bool:
+        return self.mse < self.zero_mse
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self) | {"beats_zero": self.beats_zero}
+
+
+@dataclass(frozen=True)
+class TrackSummary:
+    track: str
+    recordings: int
+    mean_r: float
+    beats_zero: int
+    mean_eta: float | None
+    mean_seconds_per_takeover: float | None
+
+
+def model_for(pattern: str, rec: PublicRecording) -> Path:
+    """The model that never saw ``rec``: ``pattern`` with ``{fold}`` replaced (a pattern without it: one model)."""
+    return Path(pattern.replace(FOLD_FIELD, rec.fold))
+
+
+def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: bool = True,
+                    max_offset_m: float = 1.0) -> RecordingScore:
+    """Open loop on every row; closed loop too on the tracks of :data:`CLOSED_LOOP_TRACKS`."""
+    from tools.evaluate.offline import score_models
+
+    data = root / rec.name
+    (score,) = score_models([model], data)
+    eta = interventions = per_takeover = None
+    if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
+        eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m)
+    return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
+                          round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover)
+
+
+def _closed_loop(data: Path, model: Path, max_offset_m: float) -> tuple[float, int, float]:
+    from protocol.datalog import read_log
+    from tools.drivelog.drivers import make_driver
+    from tools.drivelog.loop import LoopRules, drive
+    from tools.drivelog.path import WHEELBASE_M, recorded_drive
+    from tools.drivelog.yaw import fit_wheelbase
+
+    log = recorded_drive(read_log(data)[0])
+    try:
+        wheelbase = fit_wheelbase(log).wheelbase_m
+    except ValueError:  # as rbc drive-log does: the default car where the frames cannot say
+        wheelbase = WHEELBASE_M
+    driver, _ = make_driver(log, model, None)
+    result = drive(log, driver, LoopRules(max_offset_m=max_offset_m, wheelbase_m=wheelbase), snapshots=0)
+    return round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2)
+
+
+def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
+              max_offset_m: float = 1.0, workers: int = 1,
+              on_done: Callable[[int, int], None] | None = None) -> list[RecordingScore]:
+    """Every recording under its fold's model, in ``recs`` order; ``workers`` processes at once."""
+    jobs = [(rec, root, model_for(pattern, rec), closed_loop, max_offset_m) for rec in recs]
+    out: list[RecordingScore | None] = [None] * len(jobs)
+    if workers <= 1:
+        for i, job in enumerate(jobs):
+            out[i] = score_recording(*job)
+            if on_done:
+                on_done(i + 1, len(jobs))
+        return [r for r in out if r is not None]
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(score_recording, *job): i for i, job in enumerate(jobs)}
+        for done, future in enumerate(as_completed(futures), start=1):
+            out[futures[future]] = future.result()
+            if on_done:
+                on_done(done, len(jobs))
+    return [r for r in out if r is not None]
+
+
+def summarise(scores: Sequence[RecordingScore]) -> list[TrackSummary]:
+    """Per track, in the order tracks first appear: mean r, how many beat always-0, mean eta where driven."""
+    tracks = list(dict.fromkeys(s.track for s in scores))
+    out = []
+    for track in tracks:
+        mine = [s for s in scores if s.track == track]
+        driven = [s for s in mine if s.eta is not None]
+        out.append(TrackSummary(
+            track, len(mine), round(float(np.mean([s.pearson_r for s in mine])), 3), sum(s.beats_zero for s in mine),
+            round(float(np.mean([s.eta for s in driven])), 2) if driven else None,
+            round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None))
+    return out
+
+
+def _cell(value: float | None, spec: str) -> str:
+    return "–" if value is None else format(value, spec)
+
+
+def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScore] = ()) -> str:
+    """Markdown: the per-track summary, then one row per recording (bold MSE: beats always-0)."""
+    lines = ["| track | recordings | mean r | beats always-0 | mean eta % | s per take-over |"
+             + (" peer: mean r | beats always-0 | mean eta % | s per take-over |" if peer else ""),
+             "|---|---|---|---|---|---|" + ("---|---|---|---|" if peer else "")]
+    peer_by_track = {t.track: t for t in summarise(peer)}
+    for t in summarise(scores):
+        row = (f"| {t.track} | {t.recordings} | {t.mean_r:.2f} | {t.beats_zero} of {t.recordings} | "
+               f"{_cell(t.mean_eta, '.1f')} | {_cell(t.mean_seconds_per_takeover, '.1f')} |")
+        if peer:
+            p = peer_by_track.get(t.track)
+            row += (f" {p.mean_r:.2f} | {p.beats_zero} of {p.recordings} | {_cell(p.mean_eta, '.1f')} | "
+                    f"{_cell(p.mean_seconds_per_takeover, '.1f')} |" if p else " – | – | – | – |")
+        lines.append(row)
+    lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | eta % (take-overs; s per take-over) |"
+              + (" peer MSE | peer r | peer eta % |" if peer else ""),
+              "|---|---|---|---|---|---|---|---|" + ("---|---|---|" if peer else "")]
+    peer_by_name = {p.name: p for p in peer}
+
+    def mse(s: RecordingScore) -> str:
+        return f"**{s.mse:.4f}**" if s.beats_zero else f"{s.mse:.4f}"
+
+    def loop(s: RecordingScore) -> str:
+        return "–" if s.eta is None else f"{s.eta:.1f} ({s.interventions}; {s.seconds_per_takeover:.1f} s)"
+
+    for s in sorted(scores, key=lambda s: (s.track, s.name.lower())):
+        row = (f"| {s.name} | {s.track} | {s.fold} | {s.frames} | {s.zero_mse:.4f} | {mse(s)} | {s.pearson_r:.2f} | "
+               f"{loop(s)} |")
+        if peer:
+            p = peer_by_name.get(s.name)
+            row += f" {mse(p)} | {p.pearson_r:.2f} | {loop(p)} |" if p else " – | – | – |"
+        lines.append(row)
+    return "\n".join(lines)
