@@ -138,4 +138,6 @@ class SteeringModel:
         return (f"{self.path.name} input {self.input_name}{list(self.input_shape)} "
                 f"provider {self.config.provider} threads {self.config.threads}, contract ({self.contract_source}) "
                 f"{self.contract.width}x{self.contract.height} {self.contract.color} {self.contract.layout} "
-                f"crop {self.contract.crop_top}..{self.contract.crop_bottom}")
+                f"crop {self.contract.crop_top}..{self.contract.crop_bottom}"
+                + (f" decode 1/{self.contract.decode_reduce}" if self.contract.decode_reduce else "")
+                + (f" edges {self.contract.blank_columns} blanked" if self.contract.blank_columns else ""))
