@@ -50,16 +50,21 @@ def frame_to_network_image(rgb: np.ndarray, contract: PreprocessContract) -> np.
     return np.ascontiguousarray(out)
 
 
+def blank_edges(images: np.ndarray, columns: int) -> np.ndarray:
+    """In place: the outer ``columns`` columns on each side of (N, H, W, C) images repeat the next one inward."""
+    if columns:
+        images[:, :, :columns] = images[:, :, columns:columns + 1]
+        images[:, :, -columns:] = images[:, :, -columns - 1:-columns]
+    return images
+
+
 def to_input_tensor(images: np.ndarray, contract: PreprocessContract) -> np.ndarray:
     """Scale/offset a uint8 batch (N, H, W, 3) or one image (H, W, 3) to float32 in the contract's layout
     (after repeating the edge columns a ``blank_columns`` contract asks for)."""
     if images.ndim == 3:
         images = images[None]
     x = images.astype(np.float32)
-    b = contract.blank_columns
-    if b:  # every input of the network passes here: serving, training batches, validation
-        x[:, :, :b] = x[:, :, b:b + 1]
-        x[:, :, -b:] = x[:, :, -b - 1:-b]
+    blank_edges(x, contract.blank_columns)  # every input of the network passes here: serving, training, validation
     x *= np.float32(contract.scale)
     x += np.float32(contract.offset)
     if contract.layout == "nchw":

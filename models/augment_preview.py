@@ -10,6 +10,7 @@ import argparse
 
 import numpy as np
 
+from drive_server.preprocess import blank_edges
 from models.augment import AugParams, augment_reference, draw_params
 from models.train_config import TrainConfig
 from protocol.facts import CAMERAS
@@ -37,7 +38,8 @@ def describe(params: AugParams, i: int) -> str:
     return " ".join(parts) or "none"
 
 
-def write_preview(args: argparse.Namespace) -> int:
+def write_preview(args: argparse.Namespace, options: dict) -> int:
+    """``options``: the ``TrainConfig`` fields of the preview's crop, decode, brightness and turn flags."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -48,11 +50,8 @@ def write_preview(args: argparse.Namespace) -> int:
     from models.framecache import build_cache, load_frame
     from protocol.datalog import read_logs
 
-    options = {k: getattr(args, k, None) for k in ("crop_top", "crop_bottom", "brightness_range")}
-    options["decode_reduce"] = getattr(args, "decode_reduce", 0) or 0
-    options |= {k: getattr(args, k) for k in ("yaw_aug", "yaw_range", "yaw_gain") if getattr(args, k, None) is not None}
     pipeline = TrainConfig(data=[], out="", behavior=args.behavior, arch=args.arch, approach=args.approach,
-                           brightness_mode=getattr(args, "brightness_mode", None) or "add", **options).pipeline()
+                           **options).pipeline()
     dataset = read_logs(args.data)
     rng = np.random.default_rng(args.seed)
     # prefer turning frames so the label corrections are visible, as the paper's figures do
@@ -75,10 +74,7 @@ def write_preview(args: argparse.Namespace) -> int:
     for k, s in enumerate(chosen):
         frames = {c: load_frame(getattr(s, c)) for c in cams if getattr(s, c) is not None}
         full, label = augment_reference(frames, params, k, pipeline.augment)
-        net = fast[k].copy()
-        b = pipeline.contract.blank_columns
-        if b:  # as to_input_tensor does for the network
-            net[:, :b], net[:, -b:] = net[:, b:b + 1], net[:, -b - 1:-b]
+        net = blank_edges(fast[k][None].copy(), pipeline.contract.blank_columns)[0]  # as the network sees it
         if pipeline.contract.color == "yuv":
             net = cv2.cvtColor(net, cv2.COLOR_YUV2RGB)
         r, c = divmod(k, cols)

@@ -34,6 +34,7 @@ BONNET_CROP = (64, 136)
 
 def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
     """Crop (carried in the model's contract) and brightness-augmentation strength, for train and previews."""
+    from drive_server.contract import DECODE_REDUCTIONS
     from models.train_config import SCALE_BRIGHTNESS_RANGE, TrainConfig
 
     parser.add_argument("--crop-top", type=int, default=TrainConfig.crop_top, metavar="ROW",
@@ -42,7 +43,7 @@ def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--crop-bottom", type=int, default=TrainConfig.crop_bottom, metavar="ROW",
                         help="row after the last one the network sees (default: the approach's, 160; with the "
                              f"bonnet in view: {BONNET_CROP[1]})")
-    parser.add_argument("--decode-reduce", type=int, choices=(0, 1, 2, 4, 8), default=TrainConfig.decode_reduce,
+    parser.add_argument("--decode-reduce", type=int, choices=DECODE_REDUCTIONS, default=TrainConfig.decode_reduce,
                         metavar="N", help="decode camera frames at 1/N size, in training and in the drive server (the "
                         "model's contract says so): 2 halves the decode and resize cost even where the crop then has "
                         "fewer rows than the network; 0: the largest that keeps the network's resolution "

@@ -20,5 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from models.augment_preview import write_preview
+    from tools.arguments import preprocess_options
 
-    return write_preview(args)
+    return write_preview(args, preprocess_options(args) | {k: getattr(args, k) for k in ("yaw_aug", "yaw_range",
+                                                                                           "yaw_gain")})

@@ -92,20 +92,15 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
 
 def _wheelbase(args: argparse.Namespace, log) -> tuple[float, dict | None]:
     """The car's effective wheelbase: given, or fitted to the recorded frames (default if the fit fails)."""
-    import logging
-
-    from tools.drivelog.path import WHEELBASE_M
-    from tools.drivelog.yaw import fit_wheelbase
+    from tools.drivelog.yaw import wheelbase_or_default
 
     if args.wheelbase is not None:
         if not 1.0 <= args.wheelbase <= 20.0:
             raise CommandError("--wheelbase must be 1..20 metres")
         return args.wheelbase, None
-    try:
-        fit = fit_wheelbase(log)
-    except ValueError as exc:
-        logging.getLogger("rbc").warning("%s; using %.1f m", exc, WHEELBASE_M)
-        return WHEELBASE_M, None
+    wheelbase, fit = wheelbase_or_default(log)
+    if fit is None:
+        return wheelbase, None
     print(f"car: effective wheelbase {fit.wheelbase_m:.2f} m, fitted on {fit.pairs} frame pairs "
           f"(image turn against recorded steering: r {fit.r:.2f})")
     return fit.wheelbase_m, {"wheelbase_m": round(fit.wheelbase_m, 3), "pairs": fit.pairs, "r": round(fit.r, 3)}

@@ -73,3 +73,17 @@ def fit_wheelbase(drive: RecordedDrive, camera: UnityCamera = DEFAULT_CAMERA, ma
         raise ValueError(f"fitted wheelbase {wheelbase:.1f} m is implausible: the frames do not follow the steering")
     r = float(np.corrcoef(predicted, measured)[0, 1])
     return WheelbaseFit(wheelbase, int(len(measured)), r)
+
+
+def wheelbase_or_default(drive: RecordedDrive) -> tuple[float, WheelbaseFit | None]:
+    """The fitted effective wheelbase, or the default car's (with a warning) where the frames cannot say."""
+    import logging
+
+    from tools.drivelog.path import WHEELBASE_M
+
+    try:
+        fit = fit_wheelbase(drive)
+    except ValueError as exc:
+        logging.getLogger("rbc").warning("%s; using %.1f m", exc, WHEELBASE_M)
+        return WHEELBASE_M, None
+    return fit.wheelbase_m, fit

@@ -81,14 +81,11 @@ def _closed_loop(data: Path, model: Path, max_offset_m: float) -> tuple[float, i
     from protocol.datalog import read_log
     from tools.drivelog.drivers import make_driver
     from tools.drivelog.loop import LoopRules, drive
-    from tools.drivelog.path import WHEELBASE_M, recorded_drive
-    from tools.drivelog.yaw import fit_wheelbase
+    from tools.drivelog.path import recorded_drive
+    from tools.drivelog.yaw import wheelbase_or_default
 
     log = recorded_drive(read_log(data)[0])
-    try:
-        wheelbase = fit_wheelbase(log).wheelbase_m
-    except ValueError:  # as rbc drive-log does: the default car where the frames cannot say
-        wheelbase = WHEELBASE_M
+    wheelbase, _ = wheelbase_or_default(log)  # as rbc drive-log does
     driver, _ = make_driver(log, model, None)
     result = drive(log, driver, LoopRules(max_offset_m=max_offset_m, wheelbase_m=wheelbase), snapshots=0)
     return round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2)
