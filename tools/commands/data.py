@@ -80,9 +80,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cv.add_argument("--track", choices=TRACKS, default=None, help="only the recordings of this track")
     cv.add_argument("--name", action="append", default=None, metavar="NAME", help="only this recording (repeat)")
     cv.add_argument("--no-closed-loop", action="store_true", help="open loop only (minutes instead of ~10)")
+    cv.add_argument("--lane", choices=("road", "path"), default="road",
+                    help="closed loop: a take-over when the car leaves the road (road) or is --max-offset from the "
+                         "driver's line (path), as rbc drive-log (default %(default)s)")
     cv.add_argument("--max-offset", type=float, default=1.0, metavar="M",
-                    help="metres off the recorded path at which a person takes over, as rbc drive-log "
-                         "(default %(default)s)")
+                    help="with --lane path: metres off the recorded path at which a person takes over, as rbc "
+                         "drive-log (default %(default)s)")
     cv.add_argument("--workers", type=int, default=2, help="recordings scored at once (default %(default)s)")
     cv.add_argument("--json", type=Path, default=None, metavar="OUT", help="also write every score as JSON")
 
@@ -124,13 +127,14 @@ def _crossval(args: argparse.Namespace) -> int:
         progress = Progress(f"crossval {what}", unit="recording")
         try:
             results[what] = score_all(recs, args.root, pattern, closed, args.max_offset, args.workers,
-                                      on_done=progress)
+                                      on_done=progress, lane=args.lane)
         finally:
             progress.close()
     print(format_tables(results["folds"], results.get("peer", ())))
     if args.json:
         write_json(args.json, {"code_version": code_version(), "root": str(args.root), "models": args.models,
-                               "peer": args.peer, "closed_loop": closed, "max_offset_m": args.max_offset,
+                               "peer": args.peer, "closed_loop": closed, "lane": args.lane,
+                               "max_offset_m": args.max_offset,
                                **{what: {"recordings": [s.as_dict() for s in scores],
                                          "tracks": [t.__dict__ for t in summarise(scores)]}
                                   for what, scores in results.items()}})

@@ -20,8 +20,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                           "zero: always straight (fails on curves)")
     p.add_argument("--steer-bias", type=float, default=0.0, metavar="B",
                    help="added to every steering value (a biased driver must fail: a check of the measure)")
+    p.add_argument("--lane", choices=("road", "path"), default=LoopRules.lane,
+                   help="road: a person takes over when the car's side passes an edge line of the road, found in "
+                        "each recorded frame; path: when the car is --max-offset from the driver's own line (DAVE-2)")
     p.add_argument("--max-offset", type=float, default=LoopRules.max_offset_m, metavar="M",
-                   help="metres off the recorded path at which a person takes over (DAVE-2: 1 m)")
+                   help="with --lane path: metres off the driver's line at which a person takes over (DAVE-2: 1 m)")
+    p.add_argument("--views", choices=("nearest", "centre"), default=LoopRules.views,
+                   help="nearest: re-project the nearest of the three recorded cameras (the side ones are real views "
+                        "0.95 m to each side); centre: the centre camera only (DAVE-2)")
     p.add_argument("--speed-limit", type=float, default=LoopRules.speed_limit_kmh, metavar="KMH",
                    help="the car drives at the recorded speed capped at this, km/h: drive_server's default limit, "
                         "the speed a model is deployed at (0: as recorded, often full throttle)")
@@ -67,14 +73,16 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     log = recorded_drive(samples, args.speed_unit)
     driver, name = make_driver(log, args.model, args.baseline, args.steer_bias)
     wheelbase, fit = _wheelbase(args, log)
-    rules = LoopRules(max_offset_m=args.max_offset, wheelbase_m=wheelbase, speed_limit_kmh=args.speed_limit)
+    rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset, views=args.views, wheelbase_m=wheelbase,
+                      speed_limit_kmh=args.speed_limit)
+    road = _road(log, rules) if rules.lane == "road" else None
     progress = Progress("drive-log", unit="frame")
     try:
-        result = drive(log, driver, rules, on_step=lambda j: progress(j + 1, len(log)))
+        result = drive(log, driver, rules, on_step=lambda j: progress(j + 1, len(log)), road=road)
     finally:
         progress.close()
-    record = result_record(result, args.data, len(log), name, args.steer_bias) | {"wheelbase_fit": fit,
-                                                                         "code_version": code_version()}
+    record = result_record(result, args.data, len(log), name, args.steer_bias, road=road) | {
+        "wheelbase_fit": fit, "code_version": code_version()}
     limit = f"at most {args.speed_limit:g} km/h" if args.speed_limit else "at the recorded speed"
     print(f"drive-log {args.data}: {len(log)} frames, {result.frames} steps, {result.driving_time_s:.0f} s driving "
           f"{limit}, driver {name}")
@@ -88,6 +96,21 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
         write_json(args.json, record)
         print(f"json  {args.json}")
     return 0
+
+
+def _road(log, rules):
+    """The road's edges in every frame, with progress and a one-line summary."""
+    from tools.console import Progress
+    from tools.drivelog.road import estimate_road
+
+    progress = Progress("road edges", unit="frame")
+    try:
+        road = estimate_road(log, rules.wheelbase_m, on_frame=lambda j: progress(j + 1, len(log)))
+    finally:
+        progress.close()
+    print(f"road: {road.width_m:.1f} m between its edge lines (median), seen in {100 * road.measured_share:.0f} % "
+          f"of the frames (the others take it from their neighbours)")
+    return road
 
 
 def _wheelbase(args: argparse.Namespace, log) -> tuple[float, dict | None]:

@@ -67,6 +67,14 @@ def _yaw(rad: float) -> np.ndarray:
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
+def ground_to_pixels(camera: UnityCamera, x_m: np.ndarray, z_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel (column, row) of the ground points ``x_m`` to the right and ``z_m`` ahead of the camera."""
+    x = np.asarray(x_m, np.float64)
+    p = np.stack([x.ravel(), np.full(x.size, camera.height_m), np.asarray(z_m, np.float64).ravel()])
+    q = camera.intrinsics() @ _pitch(camera.pitch_deg) @ p
+    return (q[0] / q[2]).reshape(x.shape), (q[1] / q[2]).reshape(x.shape)
+
+
 def view_homographies(camera: UnityCamera, lateral_m: float, yaw_rad: float,
                       forward_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """(ground, far) homographies from a pixel of the new view to the recorded frame.
@@ -95,8 +103,13 @@ class ViewSynthesizer:
         self._below = (ys.ravel() > camera.horizon_row + 1.0).reshape(h, w)
         self._bonnet = int(camera.bonnet_row)
 
-    def view(self, frame: np.ndarray, lateral_m: float, yaw_rad: float, forward_m: float = 0.0) -> np.ndarray:
-        """What the centre camera would see from the given offset (frame: full-size RGB uint8)."""
+    def view(self, frame: np.ndarray, lateral_m: float, yaw_rad: float, forward_m: float = 0.0,
+             bonnet: np.ndarray | None = None) -> np.ndarray:
+        """What the centre camera would see from the given offset (frame: full-size RGB uint8).
+
+        ``bonnet``: the frame whose bottom rows are kept (a side camera's frame shows the bonnet from the
+        side: re-projecting one to the centre camera keeps the centre frame's bonnet instead).
+        """
         h, w = self.camera.height, self.camera.width
         if frame.shape[:2] != (h, w):
             raise ValueError(f"expected a {w}x{h} frame, got {frame.shape[1]}x{frame.shape[0]}")
@@ -107,5 +120,5 @@ class ViewSynthesizer:
             maps.append((p[:2] / p[2]).reshape(2, h, w))
         xy = np.where(self._below[None], maps[0], maps[1]).astype(np.float32)
         out = cv2.remap(frame, xy[0], xy[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        out[self._bonnet:] = frame[self._bonnet:]  # the bonnet travels with the camera
+        out[self._bonnet:] = (frame if bonnet is None else bonnet)[self._bonnet:]  # it travels with the camera
         return out

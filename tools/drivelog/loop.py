@@ -8,8 +8,14 @@ driver's steering moves it (Frenet-frame kinematics of a bicycle along a path of
 
     ds = v dt cos(psi) / (1 - e kappa_l),   de = v dt sin(psi),   dpsi = v dt kappa_car - kappa_l ds
 
-A person takes over when ``|e|`` exceeds the lane margin (NVIDIA's DAVE-2 evaluation: 1 m) and puts the
-car back on the recorded path; every take-over costs 6 s of autonomy (the paper's Eq. 1).
+A person takes over when the car leaves the road, its side past an edge line found in the recorded frame
+(:mod:`tools.drivelog.road`; ``lane="road"``), or, as NVIDIA's DAVE-2 evaluation did on roads with lanes,
+when ``|e|`` exceeds 1 m from the driver's own line (``lane="path"``); the person puts the car back on the
+recorded path, and every take-over costs 6 s of autonomy (the paper's Eq. 1).
+
+The view is re-projected from the nearest of the three recorded cameras: the left and right ones are real
+views 0.95 m to each side, so a car up to about 1.4 m off the driver's line is never shown a view moved
+more than 0.5 m from a real one (``views="nearest"``; ``"centre"``: the centre camera alone, as DAVE-2).
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import numpy as np
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ViewSynthesizer
 from tools.drivelog.path import WHEELBASE_M, RecordedDrive, advance, curvature
+from tools.drivelog.road import RoadEdges
 from tools.sim.driving.rules import degree_of_autonomy
 
 #: Below this speed (m/s) the car is standing or creeping: time there is not counted as driving.
@@ -35,7 +42,14 @@ MAX_STEPS_PER_FRAME = 40
 class LoopRules:
     """What counts as leaving the lane, and the car. Distances in metres."""
 
-    max_offset_m: float = 1.0  # DAVE-2: a take-over when the car is more than 1 m off the path it should drive
+    # "road": a take-over when the car's side passes an edge line of the road; "path": when the car is more
+    # than max_offset_m off the driver's own line (DAVE-2's 1 m, on roads whose lanes are about the car's width)
+    lane: str = "road"
+    max_offset_m: float = 1.0
+    half_width_m: float = 0.95  # the car, 1.9 m wide (design card)
+    # where the recorded driver was at the edge already, the car may still move this far towards it
+    min_margin_m: float = 0.5
+    views: str = "nearest"  # re-project the nearest of the three cameras ("centre": the centre camera only)
     wheelbase_m: float = WHEELBASE_M
     # the car's speed: the recorded one capped here, km/h (0: as recorded). 25: drive_server's default limit,
     # the speed a model is deployed at (the paper's 25 km/h)
@@ -65,6 +79,7 @@ class Snapshot:
     heading_deg: float
     steering: float
     takeover: bool = False
+    limits: tuple[float, float] | None = None  # offsets at which the car leaves the lane, left and right
 
 
 @dataclass
@@ -77,6 +92,8 @@ class LoopResult:
     steering: np.ndarray  # what the driver steered at every step
     snapshots: list[Snapshot] = field(default_factory=list)
     rules: LoopRules = LoopRules()
+    limits: np.ndarray | None = None  # (steps, 2): the offsets (m) at which a take-over came, left and right
+
 
     @property
     def interventions(self) -> int:
@@ -95,16 +112,44 @@ class LoopResult:
         return float(np.sqrt(np.mean(self.offsets ** 2))) if len(self.offsets) else 0.0
 
 
+def lane_limits(rules: LoopRules, road: RoadEdges | None, n: int) -> np.ndarray:
+    """(n, 2): per recorded frame, the offsets from the driver's line at which the car has left the lane."""
+    if rules.lane == "path":
+        return np.tile([-rules.max_offset_m, rules.max_offset_m], (n, 1))
+    if rules.lane != "road":
+        raise ValueError(f"unknown lane rule {rules.lane!r}")
+    if road is None or len(road) != n:
+        raise ValueError("the road rule needs the road's edges in every frame")
+    left = np.minimum(road.left_m + rules.half_width_m, -rules.min_margin_m)
+    right = np.maximum(road.right_m - rules.half_width_m, rules.min_margin_m)
+    return np.stack([left, right], axis=1)
+
+
+def _view(synth: ViewSynthesizer, drive_log: RecordedDrive, i: int, e: float, psi: float, forward: float,
+          rules: LoopRules, camera: UnityCamera) -> np.ndarray:
+    """The view from offset ``e``: re-projected from the nearest recorded camera (see the module docstring)."""
+    centre = read_jpeg_file(drive_log.frames[i])
+    side = "left" if e < 0 else "right"
+    source = drive_log.side_frame(i, side) if rules.views == "nearest" and abs(e) > camera.side_offset_m / 2 else None
+    if source is None:
+        return synth.view(centre, e, psi, forward)
+    moved = e + camera.side_offset_m if side == "left" else e - camera.side_offset_m
+    return synth.view(read_jpeg_file(source), moved, psi, forward, bonnet=centre)
+
+
 def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules(),
           camera: UnityCamera = DEFAULT_CAMERA, snapshots: int = 8,
-          on_step: Callable[[int], None] | None = None) -> LoopResult:
+          on_step: Callable[[int], None] | None = None, road: RoadEdges | None = None) -> LoopResult:
     """Run ``driver`` along every session of the recorded drive, one step per recorded frame interval.
 
     The car drives at the recorded speed capped at ``rules.speed_limit_kmh`` (0: no cap), so where the
     person drove faster it takes more steps than there are frames. ``snapshots`` evenly spaced views are
     kept (plus the view before each take-over, up to the same number). ``on_step(i)``: the frame reached.
+    ``road``: the road's edges in every frame (:func:`tools.drivelog.road.estimate_road`), for ``lane="road"``.
     """
     synth = ViewSynthesizer(camera)
+    frame_limits = lane_limits(rules, road, len(drive_log))
+    limits: list[np.ndarray] = []
     n = len(drive_log)
     cap = rules.speed_limit_kmh / 3.6 if rules.speed_limit_kmh > 0 else math.inf
     offsets: list[float] = []
@@ -124,19 +169,21 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             i = steps.start + max(0, int(np.searchsorted(arc, s, side="right")) - 1)
             if drive_log.dt[i] <= 0:  # the session's last frame
                 break
-            view = synth.view(read_jpeg_file(drive_log.frames[i]), e, psi, s - drive_log.arc[i])
+            view = _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera)
             delta = float(driver(view, i))
             offsets.append(e)
+            limits.append(frame_limits[i])
             headings.append(math.degrees(psi))
             steer.append(delta)
             v, dt = min(drive_log.speed[i], cap), drive_log.dt[i]
             if v >= MOVING_MPS:
                 moving_time += dt
             s, e, psi = advance(s, e, psi, v, dt, float(curvature(delta, rules.wheelbase_m)), float(k_path[i]))
-            over = abs(e) > rules.max_offset_m
+            over = not frame_limits[i, 0] <= e <= frame_limits[i, 1]
             fresh = i != last and i in keep
             if fresh or (over and sum(x.takeover for x in shots) < snapshots):
-                shots.append(Snapshot(i, view, offsets[-1], headings[-1], delta, over))
+                shots.append(Snapshot(i, view, offsets[-1], headings[-1], delta, over,
+                                      (float(frame_limits[i, 0]), float(frame_limits[i, 1]))))
             if over:
                 takeovers.append(Takeover(i, moving_time, e, len(offsets) - 1))
                 e, psi = 0.0, 0.0  # a person puts the car back on the recorded path
@@ -144,4 +191,4 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 on_step(i)
             last = i
     return LoopResult(len(offsets), moving_time, takeovers, np.array(offsets), np.array(headings),
-                      np.array(steer), shots, rules)
+                      np.array(steer), shots, rules, np.array(limits).reshape(-1, 2))

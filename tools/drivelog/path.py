@@ -40,7 +40,8 @@ def curvature(steering: np.ndarray | float, wheelbase_m: float = WHEELBASE_M) ->
 @dataclass(frozen=True)
 class RecordedDrive:
     """Per centre frame, in log order: its file, recorded steering, speed (m/s), interval to the next
-    frame (s), session number, and arc length along its session (m)."""
+    frame (s), session number, arc length along its session (m), and the left and right cameras' frames
+    taken with it (None where the log names none)."""
 
     frames: list[Path]
     steering: np.ndarray
@@ -48,6 +49,14 @@ class RecordedDrive:
     dt: np.ndarray
     session: np.ndarray
     arc: np.ndarray
+    left_frames: list[Path | None] | None = None
+    right_frames: list[Path | None] | None = None
+
+    def side_frame(self, i: int, side: str) -> Path | None:
+        """Frame ``i`` of the ``left`` or ``right`` camera, if the log names one and it is on disk."""
+        frames = self.left_frames if side == "left" else self.right_frames
+        path = frames[i] if frames is not None else None
+        return path if path is not None and path.is_file() else None
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -76,7 +85,8 @@ def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUni
     for i in range(1, len(samples)):
         arc[i] = 0.0 if session[i] != session[i - 1] else arc[i - 1] + step[i - 1]
     steering = np.array([s.steering for s in samples], np.float64)
-    return RecordedDrive([s.center for s in samples], steering, speed, dt, session, arc)
+    return RecordedDrive([s.center for s in samples], steering, speed, dt, session, arc,
+                         [s.left for s in samples], [s.right for s in samples])
 
 
 def advance(s: float, e: float, psi: float, v: float, dt: float, k_car: float, k_lane: float

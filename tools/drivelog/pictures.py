@@ -31,6 +31,10 @@ def write_strip(result: LoopResult, path: Path, columns: int = 4) -> Path:
         if shot.takeover:
             cv2.rectangle(tile, (1, 1), (w - 2, h - 2), _RED, 3)
             draw_text(tile, "take-over: left the lane", (4, h - 28), px=11, color=_RED, box=True)
+        if shot.limits is not None and result.rules.lane == "road":
+            draw_text(tile, f"road edges {shot.limits[0] - shot.offset_m - result.rules.half_width_m:+.1f} / "
+                            f"{shot.limits[1] - shot.offset_m + result.rules.half_width_m:+.1f} m",
+                      (4, 30), px=11, box=True)
         r, c = divmod(k, columns)
         sheet[r * h:(r + 1) * h, c * w:(c + 1) * w] = tile
     _write(path, sheet)
@@ -38,22 +42,25 @@ def write_strip(result: LoopResult, path: Path, columns: int = 4) -> Path:
 
 
 def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[int, int] = (1000, 300)) -> Path:
-    """Lateral offset from the recorded path at every step; the lane margins dashed, take-overs in red."""
+    """Lateral offset from the recorded path at every step; where the car leaves the lane (grey), take-overs
+    in red."""
     width, height = size
     left, right, top, bottom = 56, 12, 28, 30
     img = np.full((height, width, 3), 255, np.uint8)
     n = max(2, len(result.offsets))
-    limit = result.rules.max_offset_m
-    span = max(limit * 1.5, float(np.max(np.abs(result.offsets))) if len(result.offsets) else 0.0)
+    limits = result.limits if result.limits is not None and len(result.limits) else None
+    limit = float(np.max(np.abs(limits))) if limits is not None else result.rules.max_offset_m
+    span = max(limit * 1.1, float(np.max(np.abs(result.offsets))) if len(result.offsets) else 0.0, 0.5)
 
     def xy(i: float, e: float) -> tuple[int, int]:
         x = left + (width - left - right) * i / (n - 1)
         y = top + (height - top - bottom) * (0.5 - e / (2 * span))
         return int(round(x)), int(round(y))
 
-    for e in (-limit, limit):
-        for x0 in range(left, width - right, 12):
-            cv2.line(img, (x0, xy(0, e)[1]), (min(x0 + 6, width - right), xy(0, e)[1]), _GREY, 1)
+    if limits is not None and len(limits) > 1:
+        for side in (0, 1):
+            pts = np.array([xy(i, e) for i, e in enumerate(limits[:, side])], np.int32)
+            cv2.polylines(img, [pts], False, _GREY, 1, cv2.LINE_AA)
     cv2.line(img, xy(0, 0), xy(n - 1, 0), (210, 210, 210), 1)
     if len(result.offsets) > 1:
         pts = np.array([xy(i, e) for i, e in enumerate(result.offsets)], np.int32)
@@ -62,6 +69,8 @@ def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[in
         cv2.circle(img, xy(t.step, t.offset_m), 4, _RED, -1, cv2.LINE_AA)
     for e in (-limit, 0.0, limit):
         draw_text(img, f"{e:+.1f} m", (4, xy(0, e)[1] + 4), px=11, color=(60, 60, 60))
+    lane = "road's edges" if result.rules.lane == "road" else f"{result.rules.max_offset_m:g} m from the driver's line"
+    draw_text(img, f"grey: where the car leaves the lane ({lane})", (width - 330, 18), px=11, color=(90, 90, 90))
     draw_text(img, title, (left, 18), px=13, color=(30, 30, 30))
     draw_text(img, f"step of the loop (0 .. {n - 1}, one per recorded frame interval); red: take-overs "
                    f"({result.interventions})", (left, height - 8),

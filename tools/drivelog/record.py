@@ -10,10 +10,11 @@ import numpy as np
 
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
 from tools.drivelog.loop import LoopResult
+from tools.drivelog.road import RoadEdges
 
 
 def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias: float,
-                  camera: UnityCamera = DEFAULT_CAMERA) -> dict[str, Any]:
+                  camera: UnityCamera = DEFAULT_CAMERA, road: RoadEdges | None = None) -> dict[str, Any]:
     """``eta`` (percent), ``interventions``, ``offset_rms_m`` and ``frames``, with what they were measured under."""
     return {
         "data": str(data),
@@ -32,5 +33,7 @@ def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias
         "takeovers": [{"frame": t.frame, "time_s": round(t.time_s, 2), "offset_m": round(t.offset_m, 3)}
                       for t in result.takeovers],
         "rules": asdict(result.rules),
+        "road": None if road is None else {"width_m": round(road.width_m, 3),
+                                           "measured_share": round(road.measured_share, 4)},
         "camera": asdict(camera),
     }

@@ -64,7 +64,7 @@ def model_for(pattern: str, rec: PublicRecording) -> Path:
 
 
 def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: bool = True,
-                    max_offset_m: float = 1.0) -> RecordingScore:
+                    max_offset_m: float = 1.0, lane: str = "road") -> RecordingScore:
     """Open loop on every row; closed loop too on the tracks of :data:`CLOSED_LOOP_TRACKS`."""
     from tools.evaluate.offline import score_models
 
@@ -72,30 +72,33 @@ def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: 
     (score,) = score_models([model], data)
     eta = interventions = per_takeover = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
-        eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m)
+        eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m, lane)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
                           round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover)
 
 
-def _closed_loop(data: Path, model: Path, max_offset_m: float) -> tuple[float, int, float]:
+def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str) -> tuple[float, int, float]:
     from protocol.datalog import read_log
     from tools.drivelog.drivers import make_driver
     from tools.drivelog.loop import LoopRules, drive
     from tools.drivelog.path import recorded_drive
+    from tools.drivelog.road import estimate_road
     from tools.drivelog.yaw import wheelbase_or_default
 
     log = recorded_drive(read_log(data)[0])
     wheelbase, _ = wheelbase_or_default(log)  # as rbc drive-log does
     driver, _ = make_driver(log, model, None)
-    result = drive(log, driver, LoopRules(max_offset_m=max_offset_m, wheelbase_m=wheelbase), snapshots=0)
+    rules = LoopRules(lane=lane, max_offset_m=max_offset_m, wheelbase_m=wheelbase)
+    road = estimate_road(log, wheelbase) if lane == "road" else None
+    result = drive(log, driver, rules, snapshots=0, road=road)
     return round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2)
 
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
               max_offset_m: float = 1.0, workers: int = 1,
-              on_done: Callable[[int, int], None] | None = None) -> list[RecordingScore]:
+              on_done: Callable[[int, int], None] | None = None, lane: str = "road") -> list[RecordingScore]:
     """Every recording under its fold's model, in ``recs`` order; ``workers`` processes at once."""
-    jobs = [(rec, root, model_for(pattern, rec), closed_loop, max_offset_m) for rec in recs]
+    jobs = [(rec, root, model_for(pattern, rec), closed_loop, max_offset_m, lane) for rec in recs]
     out: list[RecordingScore | None] = [None] * len(jobs)
     if workers <= 1:
         for i, job in enumerate(jobs):

@@ -1,0 +1,106 @@
+"""``rbc drive-log``'s road rule (issue 22): the road's edge lines are found in the recorded frames, and a
+take-over means the car's side passed one, not 1 m from one driver's line on a road 9 m wide."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from protocol.datalog import read_log
+from protocol.jpeg import read_jpeg_file
+from tools.drivelog.camera import DEFAULT_CAMERA, ViewSynthesizer, _pitch, ground_to_pixels
+from tools.drivelog.loop import LoopRules, _view, lane_limits
+from tools.drivelog.path import RecordedDrive, recorded_drive
+from tools.drivelog.road import RoadEdges, estimate_road
+
+SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
+ASPHALT, LINE, VERGE, SKY = (118, 118, 114), (190, 170, 60), (150, 120, 80), (120, 160, 220)
+
+
+def _render(road_left: float, road_right: float, seed: int = 0) -> np.ndarray:
+    """A centre frame of a straight road between ``road_left`` and ``road_right`` (m, + right), yellow
+    edge lines inside, dirt outside; grainy asphalt as the lake's."""
+    cam = DEFAULT_CAMERA
+    v, u = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
+    rays = np.linalg.inv(cam.intrinsics()) @ np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
+    level = _pitch(cam.pitch_deg).T @ rays
+    down = level[1] > 1e-6
+    t = np.where(down, cam.height_m / np.where(down, level[1], 1.0), 0.0)
+    x = (t * level[0]).reshape(u.shape)
+    img = np.empty((cam.height, cam.width, 3), np.float64)
+    img[:] = SKY
+    ground = down.reshape(u.shape)
+    on_road = ground & (x > road_left) & (x < road_right)
+    img[ground] = VERGE
+    img[on_road] = ASPHALT
+    for edge in (road_left, road_right):
+        img[ground & (np.abs(x - edge) < 0.12)] = LINE
+    rng = np.random.default_rng(seed)
+    img += rng.normal(0, 6, img.shape)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _drive(tmp_path: Path, frames: list[np.ndarray]) -> RecordedDrive:
+    paths = []
+    for i, frame in enumerate(frames):
+        p = tmp_path / f"center_{i:03d}.jpg"
+        cv2.imwrite(str(p), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90])
+        paths.append(p)
+    n = len(paths)
+    return RecordedDrive(paths, np.zeros(n), np.full(n, 8.0), np.r_[np.full(n - 1, 0.1), 0.0], np.zeros(n, np.int64),
+                         np.arange(n) * 0.8)
+
+
+def test_the_edge_lines_of_a_rendered_road_are_found_where_they_are(tmp_path: Path) -> None:
+    # the driver 0.8 m left of the middle of an 8.6 m road: its lines at -3.5 m and +5.1 m. What is found is
+    # where the asphalt ends, the inner side of the 0.24 m line (JPEG's chroma blurs it a little further in)
+    road = estimate_road(_drive(tmp_path, [_render(-3.5, 5.1, seed) for seed in range(12)]), 2.6)
+    assert road.measured_share == 1.0
+    assert np.all((road.left_m > -3.5) & (road.left_m < -3.15))
+    assert np.all((road.right_m < 5.1) & (road.right_m > 4.75))
+    assert road.width_m == pytest.approx(8.6 - 0.45, abs=0.2)
+
+
+def test_frames_that_show_no_road_take_it_from_their_neighbours(tmp_path: Path) -> None:
+    frames = [_render(-4.0, 4.0, s) for s in range(6)] + [_render(-4.0, 4.0, 9)[:, ::-1] * 0 + 200] * 3 \
+        + [_render(-3.0, 5.0, s) for s in range(6)]
+    road = estimate_road(_drive(tmp_path, frames), 2.6)
+    assert list(road.measured) == [True] * 6 + [False] * 3 + [True] * 6
+    before, after = road.left_m[0], road.left_m[-1]
+    assert before == pytest.approx(-4.0, abs=0.35) and after == pytest.approx(-3.0, abs=0.35)
+    assert np.all(np.diff(road.left_m) >= 0) and before < road.left_m[7] < after  # between its neighbours
+
+
+def test_the_car_leaves_the_lane_when_its_side_passes_an_edge_line() -> None:
+    road = RoadEdges(np.array([-4.0, -1.2]), np.array([4.5, 0.9]), np.array([True, True]), 8.5)
+    limits = lane_limits(LoopRules(), road, 2)
+    assert limits[0] == pytest.approx([-3.05, 3.55])  # the car is 1.9 m wide
+    # a driver who was already at the lines: the car may still move 0.5 m towards them
+    assert limits[1] == pytest.approx([-0.5, 0.5])
+    assert lane_limits(LoopRules(lane="path", max_offset_m=1.0), None, 2).tolist() == [[-1.0, 1.0]] * 2
+    with pytest.raises(ValueError, match="road"):
+        lane_limits(LoopRules(), None, 2)
+
+
+def test_a_car_near_a_side_camera_is_shown_that_camera_with_its_own_bonnet() -> None:
+    log = recorded_drive(read_log(SAMPLE)[0])
+    synth, cam = ViewSynthesizer(), DEFAULT_CAMERA
+    left, centre = read_jpeg_file(log.side_frame(3, "left")), read_jpeg_file(log.frames[3])
+    view = _view(synth, log, 3, -cam.side_offset_m, 0.0, 0.0, LoopRules(), cam)
+    assert np.array_equal(view[:cam.bonnet_row], left[:cam.bonnet_row])
+    assert np.array_equal(view[cam.bonnet_row:], centre[cam.bonnet_row:])
+    near = _view(synth, log, 3, -0.3, 0.0, 0.0, LoopRules(), cam)  # closer to the centre camera
+    assert np.array_equal(near, synth.view(centre, -0.3, 0.0))
+    only_centre = _view(synth, log, 3, -cam.side_offset_m, 0.0, 0.0, LoopRules(views="centre"), cam)
+    assert np.array_equal(only_centre, synth.view(centre, -cam.side_offset_m, 0.0))
+
+
+def test_ground_points_land_where_the_view_synthesis_puts_them() -> None:
+    u, v = ground_to_pixels(DEFAULT_CAMERA, np.array([0.0, 2.0]), np.array([1e6, 10.0]))
+    assert v[0] == pytest.approx(DEFAULT_CAMERA.horizon_row, abs=1e-3) and u[0] == pytest.approx(160.0)
+    assert u[1] > 160.0 and v[1] > DEFAULT_CAMERA.horizon_row
+    assert math.isfinite(u[1])
