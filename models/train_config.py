@@ -78,6 +78,8 @@ class TrainConfig:
     val_data: list[str] = field(default_factory=list)  # recordings held out whole (implies split "recordings")
     balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
     label_lag: int = 0  # train on the steering recorded this many frames after the frame
+    # not in the paper: labels plus this much steering per metre towards the road's middle (rbc data road)
+    centre_gain: float = 0.0
     # side-camera label correction: the distance (m) in which a car 0.95 m off would be back (Eq. 4/5: gamma =
     # 0.95 / this); None: the paper's 10 m. Shorter teaches a stronger pull back to the centre line
     recovery_distance: float | None = None
@@ -106,6 +108,8 @@ class TrainConfig:
             raise ValueError(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
         if not 0.0 <= self.yaw_gain <= 5.0:
             raise ValueError(f"yaw gain must be 0..5, got {self.yaw_gain}")
+        if not 0.0 <= self.centre_gain <= 1.0:
+            raise ValueError(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
         if not 0 <= self.label_lag <= 100:
             raise ValueError(f"label lag must be 0..100 frames, got {self.label_lag}")
         if not 1 <= self.row_stride <= 1000:
@@ -132,7 +136,8 @@ class TrainConfig:
 
     def data_options(self) -> DataOptions:
         return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels,
-                           self.row_stride, tuple(self.val_data), self.balance_recordings, self.label_lag)
+                           self.row_stride, tuple(self.val_data), self.balance_recordings, self.label_lag,
+                           self.centre_gain)
 
     def pipeline(self) -> Pipeline:
         """The behavior's pipeline with this run's crop and brightness settings applied."""

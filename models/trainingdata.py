@@ -37,6 +37,10 @@ class DataOptions:
     balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
     # training labels: the steering recorded this many frames later (drivers react a few frames after they see)
     label_lag: int = 0
+    # training labels: plus this much steering per metre that the road's middle lies to the side (read from each
+    # recording's road file, rbc data road): drivers each hold a line of their own on a wide road, so the image
+    # cannot say how far the car is from that line, only from the road's middle
+    centre_gain: float = 0.0
 
     def slow(self, speeds: np.ndarray) -> np.ndarray:
         """Rows slower than ``min_speed``, comparing both speeds in km/h."""
@@ -126,7 +130,28 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     if options.smooth_frames > 1:
         labels = smooth_labels(dataset, steering if labels is None else labels, options.smooth_frames,
                                np.isin(np.arange(len(steering)), train))
+    if options.centre_gain:
+        labels = np.clip((steering if labels is None else labels)
+                         + options.centre_gain * road_middles(dataset), -1.0, 1.0).astype(np.float32)
     return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels, recording)
+
+
+def road_middles(dataset: DataSet) -> np.ndarray:
+    """Per sample, the road's middle from the camera (m, + right), from each log's road file."""
+    from models.roadfile import ROAD_FILE, read_road_middles, road_file_for
+
+    out = np.zeros(len(dataset.samples), np.float32)
+    middles: dict[Path, dict[str, float]] = {}
+    for i, sample in enumerate(dataset.samples):
+        log = Path(sample.log)
+        if log not in middles:
+            path = road_file_for(log)
+            if not path.is_file():
+                raise DataLogError(f"{log.parent} has no {ROAD_FILE}: the centre gain needs the road's edges "
+                                   f"(find them first: rbc data road {log.parent})")
+            middles[log] = read_road_middles(path)
+        out[i] = middles[log].get(Path(sample.center).name, 0.0)
+    return out
 
 
 def recording_ids(dataset: DataSet) -> np.ndarray:

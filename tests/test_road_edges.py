@@ -4,6 +4,7 @@ take-over means the car's side passed one, not 1 m from one driver's line on a r
 from __future__ import annotations
 
 import math
+import shutil
 from pathlib import Path
 
 import cv2
@@ -104,3 +105,58 @@ def test_ground_points_land_where_the_view_synthesis_puts_them() -> None:
     assert v[0] == pytest.approx(DEFAULT_CAMERA.horizon_row, abs=1e-3) and u[0] == pytest.approx(160.0)
     assert u[1] > 160.0 and v[1] > DEFAULT_CAMERA.horizon_row
     assert math.isfinite(u[1])
+
+
+def test_rbc_data_road_writes_one_row_per_centre_frame(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from models.roadfile import ROAD_FILE, read_road_middles
+    from tools.cli import main
+
+    data = tmp_path / "rec"
+    shutil.copytree(SAMPLE, data)
+    assert main(["data", "road", str(data)]) == 0
+    assert "m wide" in capsys.readouterr().out
+    middles = read_road_middles(data / ROAD_FILE)
+    samples, _ = read_log(data)
+    assert sorted(middles) == sorted(Path(s.center).name for s in samples)
+    assert all(abs(m) < 4.0 for m in middles.values())  # the driver is on the road
+
+
+def _sample_with_road(tmp_path: Path, middle_of: dict[str, float] | None = None) -> Path:
+    from models.roadfile import ROAD_FILE, write_road_file
+
+    data = tmp_path / "rec"
+    shutil.copytree(SAMPLE, data)
+    frames = [Path(s.center) for s in read_log(data)[0]]
+    middle = np.array([(middle_of or {}).get(f.name, 0.5 * (k % 5 - 2)) for k, f in enumerate(frames)])
+    write_road_file(data / ROAD_FILE, frames, middle - 4.2, middle + 4.2, np.ones(len(frames), bool))
+    return data
+
+
+def test_the_centre_gain_adds_steering_towards_the_roads_middle_and_never_scores_it(tmp_path: Path) -> None:
+    from models.behavior import pipeline_for
+    from models.roadfile import ROAD_FILE, read_road_middles
+    from models.trainingdata import DataOptions, prepare_data
+
+    data = _sample_with_road(tmp_path)
+    pipeline = pipeline_for("simplistic", "shallow", "ours")
+    plain = prepare_data([data], pipeline, 2, DataOptions(), workers=1)
+    centred = prepare_data([data], pipeline, 2, DataOptions(centre_gain=0.1), workers=1)
+    middles = read_road_middles(data / ROAD_FILE)
+    expected = np.clip(plain.targets + 0.1 * np.array([middles[Path(s.center).name]
+                                                       for s in centred.dataset.samples]), -1, 1)
+    assert np.allclose(centred.targets, expected, atol=1e-6) and not np.allclose(centred.targets, plain.targets)
+    assert np.array_equal(centred.steering, plain.steering)  # validation still scores the recorded steering
+
+
+def test_the_centre_gain_without_a_road_file_is_one_clear_error(tmp_path: Path) -> None:
+    from models.behavior import pipeline_for
+    from models.trainingdata import DataOptions, prepare_data
+    from protocol.datalog import DataLogError
+
+    data = tmp_path / "rec"
+    shutil.copytree(SAMPLE, data)
+    with pytest.raises(DataLogError, match="rbc data road"):
+        prepare_data([data], pipeline_for("simplistic", "shallow", "ours"), 2, DataOptions(centre_gain=0.1), workers=1)
+    (data / "road_edges.csv").write_text("frame,left,right\n")
+    with pytest.raises(DataLogError, match="not a road file"):
+        prepare_data([data], pipeline_for("simplistic", "shallow", "ours"), 2, DataOptions(centre_gain=0.1), workers=1)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from tools.arguments import add_speed_unit_argument
 from tools.realdata.fetch import DEFAULT_BASE_URL
 from tools.realdata.recordings import TRACKS
@@ -17,8 +19,8 @@ from tools.realdata.recordings import TRACKS
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
-                                help="stats: a table per recording; clean: a cleaned log; fetch: the public "
-                                     "recordings; "
+                                help="stats: a table per recording; clean: a cleaned log; road: the road's edges; "
+                                     "fetch: the public recordings; "
                                      "fold: rbc train arguments holding one fold of them out; crossval: each "
                                      "recording scored by the model its fold was held out of")
     formatter = parser.formatter_class
@@ -60,6 +62,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="where the repositories are: URL/owner/name")
 
 
+    road = sub.add_parser("road", formatter_class=formatter, help="find the road's edge lines in every centre frame",
+                          description="write DIR/road_edges.csv: where the road's edge lines were in each centre frame "
+                                      "(what rbc drive-log's road rule uses, and rbc train --centre-gain reads)")
+    road.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="recording folders (driving_log.csv + IMG/)")
+    road.add_argument("--speed-unit", choices=("mph", "kmh"), default="mph",
+                      help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
+
     fold = sub.add_parser("fold", formatter_class=formatter, help="rbc train arguments holding one fold out",
                           description="print --data ROOT/NAME for the public recordings outside fold F and "
                                       "--val-data ROOT/NAME for those in it (cross-validation by driver)")
@@ -96,7 +105,8 @@ def _session_gap(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return {"stats": _stats, "clean": _clean, "fetch": _fetch, "fold": _fold, "crossval": _crossval}[args.action](args)
+    return {"stats": _stats, "clean": _clean, "fetch": _fetch, "fold": _fold, "crossval": _crossval,
+            "road": _road}[args.action](args)
 
 
 def _crossval(args: argparse.Namespace) -> int:
@@ -139,6 +149,31 @@ def _crossval(args: argparse.Namespace) -> int:
                                          "tracks": [t.__dict__ for t in summarise(scores)]}
                                   for what, scores in results.items()}})
         print(f"json  {args.json}")
+    return 0
+
+
+def _road(args: argparse.Namespace) -> int:
+    from models.roadfile import ROAD_FILE, write_road_file
+    from protocol.datalog import read_log
+    from tools.console import Progress
+    from tools.drivelog.path import recorded_drive
+    from tools.drivelog.road import estimate_road
+    from tools.drivelog.yaw import wheelbase_or_default
+
+    for folder in args.dirs:
+        log = recorded_drive(read_log(folder)[0], args.speed_unit)
+        wheelbase, _ = wheelbase_or_default(log)
+        progress = Progress(f"road {folder.name}", unit="frame")
+        try:
+            road = estimate_road(log, wheelbase, on_frame=progress)
+        finally:
+            progress.close()
+        out = write_road_file(Path(folder) / ROAD_FILE, log.frames, road.left_m, road.right_m, road.measured)
+        middle = (road.left_m + road.right_m) / 2
+        print(f"{folder}: {len(log)} frames, road {road.width_m:.1f} m wide (median), seen in "
+              f"{100 * road.measured_share:.0f} % of them; the driver {abs(np.median(middle)):.1f} m "
+              f"{'left' if np.median(middle) > 0 else 'right'} of its middle (median; 5-95 %: "
+              f"{np.percentile(-middle, 5):+.1f} .. {np.percentile(-middle, 95):+.1f} m) -> {out}")
     return 0
 
 

@@ -105,7 +105,7 @@ def _road(log, rules):
 
     progress = Progress("road edges", unit="frame")
     try:
-        road = estimate_road(log, rules.wheelbase_m, on_frame=lambda j: progress(j + 1, len(log)))
+        road = estimate_road(log, rules.wheelbase_m, on_frame=progress)
     finally:
         progress.close()
     print(f"road: {road.width_m:.1f} m between its edge lines (median), seen in {100 * road.measured_share:.0f} % "

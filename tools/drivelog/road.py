@@ -146,14 +146,15 @@ def _fill(values: np.ndarray, fallback: float) -> np.ndarray:
 
 
 def estimate_road(drive: RecordedDrive, wheelbase_m: float, camera: UnityCamera = DEFAULT_CAMERA,
-                  on_frame: Callable[[int], None] | None = None) -> RoadEdges:
-    """The road's edge lines in every centre frame of ``drive`` (one pass over the frames)."""
+                  on_frame: Callable[[int, int], None] | None = None) -> RoadEdges:
+    """The road's edge lines in every centre frame of ``drive`` (one pass over the frames; ``on_frame(done,
+    total)`` after each)."""
     kappa = curvature(centred_average(drive.steering, 9), wheelbase_m)
     views = []
     for i, path in enumerate(drive.frames):
         views.append(top_down(read_jpeg_file(path), float(kappa[i]), camera))
         if on_frame:
-            on_frame(i)
+            on_frame(i + 1, len(drive))
     median, spread = asphalt_colour(views)
     raw = np.array([frame_edges(v, median, spread) for v in views]).reshape(-1, 2)
     both = np.isfinite(raw).all(axis=1)
