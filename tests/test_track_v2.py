@@ -25,6 +25,11 @@ V1_FRAME_HASHES = {"lake": "ef1a1e15d17bd132", "mountain": "cfb2652881c47f95"}
 # CPU-dispatched sin/cos differ in the last bit, so CI machines differ by a few edge pixels; a change in
 # what is drawn moves the block sums by far more (road 8.1 m wide instead of 8: mean 0.55 grey levels).
 STADIUM_THUMBS = Path(__file__).parent / "data" / "stadium_v1_thumbs.npz"
+# lake's and mountain's frames as the same block sums, written on a machine whose frames do not match the
+# hashes above (December 2026: the same last-bit differences; its stadium sums differ from the stored ones
+# by 1.3e-5 grey levels on average, at most 0.016), so the hashes are checked where they hold and the
+# block sums everywhere.
+BUILTIN_THUMBS = Path(__file__).parent / "data" / "builtin_v1_thumbs.npz"
 
 
 def v1_frames(track: Track):
@@ -52,7 +57,11 @@ def thumbs(track: Track) -> np.ndarray:
 def test_builtin_version1_tracks_render_byte_identically(name):
     track = load_track(name)
     assert track.version == 1
-    assert frames_hash(track) == V1_FRAME_HASHES[name]
+    if frames_hash(track) == V1_FRAME_HASHES[name]:
+        return
+    expected = np.load(BUILTIN_THUMBS)[name].astype(float) / 64
+    diff = np.abs(thumbs(track) / 64 - expected)  # grey levels, per block
+    assert diff.mean() < 0.05 and diff.max() < 40, (diff.mean(), diff.max())
 
 
 @pytest.mark.parametrize("lanes", [1, 2])

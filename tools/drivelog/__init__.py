@@ -2,14 +2,15 @@
 
 The recorded drive is rebuilt as a path from its speed, steering and frame times; the model drives a car
 along it, and sees what the camera would see from the car's own lateral offset and heading error: the
-nearest recorded frame re-projected through a ground-plane homography. A person takes over when the car
-leaves its lane; the degree of autonomy is the paper's Eq. 1.
+nearest recorded frame of the nearest camera re-projected through a ground-plane homography. A person takes
+over when the car leaves the road, whose edges are found in every recorded frame; the degree of autonomy is
+the paper's Eq. 1.
 
 Owns: the real simulator's camera model and its calibration from the side cameras (``camera``,
-``calibrate``), the recorded path (``path``), the loop and its drivers (``loop``), and its pictures
-(``pictures``). May import ``protocol``, ``drive_server`` (the serving pipeline, so the model sees exactly
-what the server would give it), ``tools.realdata`` (frame time stamps) and ``tools.sim.driving.rules`` (the
-degree of autonomy) and ``models.labels`` (numpy only); never torch.
+``calibrate``), the recorded path (``path``), the road's edges (``road``), the loop and its drivers
+(``loop``), and its pictures (``pictures``). May import ``protocol``, ``drive_server`` (the serving
+pipeline, so the model sees exactly what the server would give it), ``tools.realdata`` (frame time stamps),
+``tools.sim.driving.rules`` (the degree of autonomy) and ``models.labels`` (numpy only); never torch.
 
 Why not MIT's VISTA (``vista`` 2.0.6 on PyPI, the field's data-driven simulator): its sdist declares no
 dependencies but imports pyrender (OpenGL, so EGL or OSMesa on a headless machine) and ffio (an ffmpeg
