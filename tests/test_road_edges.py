@@ -160,3 +160,10 @@ def test_the_centre_gain_without_a_road_file_is_one_clear_error(tmp_path: Path) 
     (data / "road_edges.csv").write_text("frame,left,right\n")
     with pytest.raises(DataLogError, match="not a road file"):
         prepare_data([data], pipeline_for("simplistic", "shallow", "ours"), 2, DataOptions(centre_gain=0.1), workers=1)
+
+
+def test_an_unknown_lane_rule_or_view_source_is_refused() -> None:
+    with pytest.raises(ValueError, match="lane"):
+        LoopRules(lane="lanes")
+    with pytest.raises(ValueError, match="views"):
+        LoopRules(views="left")

@@ -56,6 +56,12 @@ class LoopRules:
     speed_limit_kmh: float = 25.0
     seconds_per_intervention: float = 6.0  # the paper's Eq. 1 (after DAVE-2)
 
+    def __post_init__(self) -> None:
+        if self.lane not in ("road", "path"):
+            raise ValueError(f"unknown lane rule {self.lane!r} (road or path)")
+        if self.views not in ("nearest", "centre"):
+            raise ValueError(f"unknown views {self.views!r} (nearest or centre)")
+
 
 #: A driver: (synthesized full-size RGB view, index of the recorded frame shown) -> normalised steering.
 Driver = Callable[[np.ndarray, int], float]
@@ -94,7 +100,6 @@ class LoopResult:
     rules: LoopRules = LoopRules()
     limits: np.ndarray | None = None  # (steps, 2): the offsets (m) at which a take-over came, left and right
 
-
     @property
     def interventions(self) -> int:
         return len(self.takeovers)
@@ -116,8 +121,6 @@ def lane_limits(rules: LoopRules, road: RoadEdges | None, n: int) -> np.ndarray:
     """(n, 2): per recorded frame, the offsets from the driver's line at which the car has left the lane."""
     if rules.lane == "path":
         return np.tile([-rules.max_offset_m, rules.max_offset_m], (n, 1))
-    if rules.lane != "road":
-        raise ValueError(f"unknown lane rule {rules.lane!r}")
     if road is None or len(road) != n:
         raise ValueError("the road rule needs the road's edges in every frame")
     left = np.minimum(road.left_m + rules.half_width_m, -rules.min_margin_m)

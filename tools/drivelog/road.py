@@ -79,7 +79,8 @@ def _grid() -> tuple[np.ndarray, np.ndarray]:
 
 
 def top_down(frame: np.ndarray, kappa: float, camera: UnityCamera = DEFAULT_CAMERA) -> np.ndarray:
-    """Lab top-down view (rows: distance ahead, columns: lateral), straightened along curvature ``kappa``."""
+    """Lab top-down view (rows: distance ahead, columns: lateral; uint8, as OpenCV's 8-bit Lab: a long
+    recording's views are kept until the asphalt colour is known), straightened along curvature ``kappa``."""
     xs, zs = _grid()
     x, z = np.meshgrid(xs, zs)
     u, v = ground_to_pixels(camera, x + 0.5 * kappa * z * z, z)
@@ -87,7 +88,7 @@ def top_down(frame: np.ndarray, kappa: float, camera: UnityCamera = DEFAULT_CAME
                      borderMode=cv2.BORDER_CONSTANT, borderValue=_OUTSIDE)
     outside = (u < 0) | (u > camera.width - 1) | (v < 0) | (v > camera.bonnet_row - 1)
     view[outside] = _OUTSIDE
-    return cv2.cvtColor(view, cv2.COLOR_RGB2LAB).astype(np.float32)
+    return cv2.cvtColor(view, cv2.COLOR_RGB2LAB)
 
 
 def asphalt_colour(views: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -95,7 +96,7 @@ def asphalt_colour(views: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     xs, zs = _grid()
     rows = (zs >= ASPHALT_AHEAD_M[0]) & (zs <= ASPHALT_AHEAD_M[1])
     cols = np.abs(xs) <= ASPHALT_HALF_WIDTH_M
-    patch = np.concatenate([v[rows][:, cols].reshape(-1, 3) for v in views])
+    patch = np.concatenate([v[rows][:, cols].reshape(-1, 3) for v in views]).astype(np.float32)
     median = np.median(patch, axis=0)
     spread = 1.4826 * np.median(np.abs(patch - median), axis=0)
     return median, np.maximum(spread, SPREAD_FLOOR)
@@ -104,6 +105,7 @@ def asphalt_colour(views: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 def frame_edges(view: np.ndarray, median: np.ndarray, spread: np.ndarray) -> tuple[float, float]:
     """(left, right) edge positions of one top-down view (NaN where that side was not seen)."""
     xs, _ = _grid()
+    view = view.astype(np.float32)
     distance = np.sqrt((((view - median) / spread) ** 2).sum(-1))
     window = max(1, int(round(SMOOTH_M / COLUMN_M)) | 1)
     road = cv2.blur((distance < ROAD_DISTANCE).astype(np.float32), (window, 1)) > 0.5
