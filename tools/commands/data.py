@@ -10,8 +10,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from tools.arguments import add_speed_unit_argument
 from tools.realdata.fetch import DEFAULT_BASE_URL
 from tools.realdata.recordings import TRACKS
@@ -169,11 +167,7 @@ def _road(args: argparse.Namespace) -> int:
         finally:
             progress.close()
         out = write_road_file(Path(folder) / ROAD_FILE, log.frames, road.left_m, road.right_m, road.measured)
-        middle = (road.left_m + road.right_m) / 2
-        print(f"{folder}: {len(log)} frames, road {road.width_m:.1f} m wide (median), seen in "
-              f"{100 * road.measured_share:.0f} % of them; the driver {abs(np.median(middle)):.1f} m "
-              f"{'left' if np.median(middle) > 0 else 'right'} of its middle (median; 5-95 %: "
-              f"{np.percentile(-middle, 5):+.1f} .. {np.percentile(-middle, 95):+.1f} m) -> {out}")
+        print(f"{folder}: {road.describe()} -> {out}")
     return 0
 
 

@@ -108,8 +108,7 @@ def _road(log, rules):
         road = estimate_road(log, rules.wheelbase_m, on_frame=progress)
     finally:
         progress.close()
-    print(f"road: {road.width_m:.1f} m between its edge lines (median), seen in {100 * road.measured_share:.0f} % "
-          f"of the frames (the others take it from their neighbours)")
+    print(road.describe())
     return road
 
 

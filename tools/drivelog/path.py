@@ -53,10 +53,10 @@ class RecordedDrive:
     right_frames: list[Path | None] | None = None
 
     def side_frame(self, i: int, side: str) -> Path | None:
-        """Frame ``i`` of the ``left`` or ``right`` camera, if the log names one and it is on disk."""
+        """Frame ``i`` of the ``left`` or ``right`` camera, or None (the log reader keeps only side frames
+        that are on disk, so nothing is looked up here, on the loop's every step)."""
         frames = self.left_frames if side == "left" else self.right_frames
-        path = frames[i] if frames is not None else None
-        return path if path is not None and path.is_file() else None
+        return frames[i] if frames is not None else None
 
     def __len__(self) -> int:
         return len(self.frames)

@@ -71,6 +71,15 @@ class RoadEdges:
     def measured_share(self) -> float:
         return float(np.mean(self.measured)) if len(self.measured) else 0.0
 
+    def describe(self) -> str:
+        """One line: the road's width, how often it was seen, and where the driver kept on it."""
+        driver = -(self.left_m + self.right_m) / 2  # the driver from the road's middle, + right
+        median = float(np.median(driver))
+        return (f"road {self.width_m:.1f} m wide between its edge lines (median), seen in "
+                f"{100 * self.measured_share:.0f} % of {len(self)} frames (the others take it from their "
+                f"neighbours); the driver {abs(median):.1f} m {'right' if median > 0 else 'left'} of its middle "
+                f"(median; 5-95 %: {np.percentile(driver, 5):+.1f} .. {np.percentile(driver, 95):+.1f} m)")
+
 
 def _grid() -> tuple[np.ndarray, np.ndarray]:
     """Lateral positions (columns) and distances ahead (rows) of the top-down view, metres."""
