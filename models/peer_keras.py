@@ -28,6 +28,7 @@ from drive_server.contract import PreprocessContract
 from drive_server.preprocess import frame_to_network_image
 from protocol.datalog import read_log
 from protocol.jpeg import read_jpeg_file
+from protocol.rigfile import REAL_RIG
 
 PEER_REPO = "naokishibuya/car-behavioral-cloning"
 PEER_COMMIT = "edf2061"
@@ -270,7 +271,8 @@ def model_info(weights: PeerWeights, h5: Path, yuv: str) -> dict:
             "yuv_note": "opencv31: OpenCV 3.1's COLOR_RGB2YUV (= COLOR_BGR2YUV on RGB), what the model was trained "
                         "and driven with" if yuv == "opencv31" else "correct: today's COLOR_RGB2YUV",
             "preprocess": "crop rows 60..135, cv2.resize 200x66 INTER_LINEAR, YUV in the graph, x/127.5 - 1",
-            "parameters": int(sum(w.size + b.size for w, b in weights.convs + weights.dense))}
+            "parameters": int(sum(w.size + b.size for w, b in weights.convs + weights.dense)),
+            "camera_rig": REAL_RIG}
 
 
 def verification_frames(data: Path | None, count: int = 8) -> np.ndarray:

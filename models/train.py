@@ -38,6 +38,7 @@ from models.nets import build_model, count_parameters
 from models.train_config import TrainConfig
 from models.train_record import config_record
 from models.trainingdata import PreparedData, prepare_data
+from protocol.rigfile import data_rig
 
 log = logging.getLogger(__name__)
 
@@ -234,7 +235,7 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
             "epochs": len(state.history), "train_samples": int(len(data.train)), "seed": config.seed,
             "parameters": count_parameters(model), "code_version": runrecords.code_version(),
             "split": config.split, "export": config.export, "exported_epoch": exported_epoch,
-            "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"]}
+            "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"], "camera_rig": data_rig(config.data)}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = run_dir / runfiles.MODEL
     diff = export_onnx(model.eval(), pipeline.contract, info, path, frames)

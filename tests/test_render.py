@@ -14,6 +14,8 @@ from tools.sim.track.cones import place_cones
 from tools.sim.track.files import load_track, parse_track
 from tools.sim.track.road import Track
 
+CLASSIC = "classic"  # the geometry below is the first headless camera's (horizon row 70, no bonnet)
+
 STRAIGHT = 160.0  # metres of straight road in the test stadium
 
 
@@ -32,7 +34,7 @@ def stadium(trees: int = 0, **extra) -> Track:
 
 @pytest.fixture(scope="module")
 def bare() -> Renderer:
-    return Renderer(World(stadium()))
+    return Renderer(World(stadium()), rig=CLASSIC)
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +111,7 @@ def test_pitch_up_lowers_the_horizon_and_roll_tilts_it(bare: Renderer):
 
 
 def test_light_intensity_is_monotone_and_leaves_ambient(wooded: Track):
-    r = Renderer(get_world(wooded))
+    r = Renderer(get_world(wooded), rig=CLASSIC)
     pose = on_straight()
     means = [r.render(pose, light_intensity=v).mean() for v in (0.1, 0.5, 1.0, 1.5, 2.0)]
     assert all(b > a + 1.0 for a, b in zip(means, means[1:], strict=False)), means
@@ -120,8 +122,8 @@ def test_light_intensity_is_monotone_and_leaves_ambient(wooded: Track):
 
 def test_light_direction_moves_shadows(wooded: Track):
     pose = on_straight(x=60.0)
-    a = Renderer(get_world(wooded, 0.0)).render(pose)
-    b = Renderer(get_world(wooded, 20.0)).render(pose)
+    a = Renderer(get_world(wooded, 0.0), rig=CLASSIC).render(pose)
+    b = Renderer(get_world(wooded, 20.0), rig=CLASSIC).render(pose)
     rows = slice(FRAME_HEIGHT // 2 + 10, FRAME_HEIGHT)
     diff = np.abs(a[rows].astype(int) - b[rows].astype(int)).max(-1)
     assert (diff > 25).mean() > 0.02  # shadows moved somewhere on the ground
@@ -133,8 +135,8 @@ def test_light_direction_moves_shadows(wooded: Track):
 def test_cones_are_drawn_on_their_half_of_the_road():
     track = stadium()
     cones = np.array([[60.0, -40.0 + 2.0]])  # 2 m left of the centre line, on the bottom straight
-    with_cone = Renderer(get_world(track, cones=cones)).render(on_straight(x=50.0))
-    without = Renderer(get_world(track)).render(on_straight(x=50.0))
+    with_cone = Renderer(get_world(track, cones=cones), rig=CLASSIC).render(on_straight(x=50.0))
+    without = Renderer(get_world(track), rig=CLASSIC).render(on_straight(x=50.0))
     changed = np.abs(with_cone.astype(int) - without.astype(int)).max(-1) > 30
     ys, xs = np.nonzero(changed)
     assert len(xs) > 40  # a 0.9 m cone 10 m ahead covers a visible patch
@@ -146,7 +148,7 @@ def test_cones_are_drawn_on_their_half_of_the_road():
 def test_place_cones_block_the_rendered_road():
     track = stadium()
     cones = place_cones(track, 4, seed=5)
-    r = Renderer(get_world(track, cones=cones))
+    r = Renderer(get_world(track, cones=cones), rig=CLASSIC)
     p = track.project(*cones[0])
     x, y, h = track.point_at(p.s - 9.0)
     img = r.render(Pose(x, y, h))
@@ -159,9 +161,11 @@ def test_place_cones_block_the_rendered_road():
 
 def test_rendering_is_deterministic(wooded: Track):
     pose = on_straight(offset=0.7, x=45.0)
-    first = Renderer(get_world(wooded)).render(pose, "left", light_intensity=0.7, pitch_deg=0.4, roll_deg=-0.3)
+    first = Renderer(get_world(wooded), rig=CLASSIC).render(pose, "left", light_intensity=0.7, pitch_deg=0.4,
+                                                            roll_deg=-0.3)
     clear_caches()
-    again = Renderer(World(wooded)).render(pose, "left", light_intensity=0.7, pitch_deg=0.4, roll_deg=-0.3)
+    again = Renderer(World(wooded), rig=CLASSIC).render(pose, "left", light_intensity=0.7, pitch_deg=0.4,
+                                                        roll_deg=-0.3)
     assert np.array_equal(first, again)
 
 
@@ -174,7 +178,7 @@ def test_worlds_are_cached_by_track_light_and_cones(wooded: Track):
 
 def test_bridge_looks_different_from_asphalt():
     track = stadium(surfaces=[{"from_s": 60.0, "to_s": 110.0, "kind": "bridge"}])
-    r = Renderer(get_world(track))
+    r = Renderer(get_world(track), rig=CLASSIC)
 
     def road_colour(s: float) -> np.ndarray:
         x, y, h = track.point_at(s)
@@ -184,6 +188,16 @@ def test_bridge_looks_different_from_asphalt():
     deck, asphalt = road_colour(85.0), road_colour(30.0)
     assert deck[0] - deck[2] > 30  # warm brown planks
     assert abs(asphalt[0] - asphalt[2]) < 15  # neutral grey asphalt
+
+
+def test_the_unity_rig_is_the_default_and_the_classic_one_is_kept():
+    from tools.sim.render.camera import DEFAULT_RIG, LEGACY_RIG
+
+    assert (DEFAULT_RIG, LEGACY_RIG) == ("unity", "classic")
+    track = load_track("lake")
+    x, y, h = track.point_at(100.0)
+    world = get_world(track)
+    assert np.array_equal(Renderer(world).render(Pose(x, y, h)), Renderer(world, rig="unity").render(Pose(x, y, h)))
 
 
 def test_the_unity_rig_sees_the_horizon_and_the_bonnet_where_the_real_camera_does():
@@ -200,5 +214,5 @@ def test_the_unity_rig_sees_the_horizon_and_the_bonnet_where_the_real_camera_doe
     assert np.abs(frames["center"][130, 160].astype(int) - bonnet).max() > 20  # the road above it
     assert abs(grey["left"][155, 290] - 170) < 20 and abs(grey["left"][155, 30] - 170) > 20  # moved right
     assert abs(grey["right"][155, 30] - 170) < 20 and abs(grey["right"][155, 290] - 170) > 20  # and left
-    plain = Renderer(get_world(track)).render(Pose(x, y, h))
+    plain = Renderer(get_world(track), rig="classic").render(Pose(x, y, h))
     assert not np.array_equal(plain, frames["center"])

@@ -33,7 +33,7 @@ BUILTIN_THUMBS = Path(__file__).parent / "data" / "builtin_v1_thumbs.npz"
 
 
 def v1_frames(track: Track):
-    r = Renderer(get_world(track))
+    r = Renderer(get_world(track), rig="classic")  # what version-1 tracks always rendered with
     for s in np.linspace(0, track.length, 12, endpoint=False):
         x, y, hd = track.point_at(s)
         p = Pose(x, y, hd)

@@ -69,6 +69,32 @@ def test_the_distribution_covers_what_was_asked_for():
     assert min(t.sun_elevation_deg for t in tracks) < 20 and max(t.sun_elevation_deg for t in tracks) > 55
 
 
+def test_default_worlds_never_draw_udacity_themes_and_asked_for_ones_look_like_the_real_tracks():
+    from tools.sim.track.themes import GENERIC_THEMES, UDACITY_THEMES
+
+    assert FAST.themes == GENERIC_THEMES and not set(UDACITY_THEMES) & set(GENERIC_THEMES)
+    assert not {generate_world(s, FAST)["scenery"]["theme"] for s in range(2_000_000, 2_000_030)} & set(UDACITY_THEMES)
+    cfg = WorldGenConfig(drive_check=False, themes=UDACITY_THEMES)
+    seen = set()
+    for seed in range(2_000_000, 2_000_012):
+        doc = generate_world(seed, cfg)
+        track = parse_track(json.loads(json.dumps(doc)), doc["name"])
+        theme = track.scenery.theme
+        seen.add(theme)
+        assert theme in UDACITY_THEMES
+        assert {s.kind for s in track.surfaces} <= {"asphalt", "bridge"}  # the real tracks are paved
+        if theme == "udacity_lake":  # yellow edge lines, the light concrete kerb strip, coarse asphalt
+            edges = track.edges
+            assert (edges.line_color, edges.line_style, edges.verge) == ("yellow", "solid", "concrete")
+            assert track.appearance.grain >= 2.0
+        if theme == "udacity_jungle":
+            assert (track.edges.line_color, track.edges.center_color, track.edges.center_style) == (
+                "white", "white", "dashed")
+    assert len(seen) >= 2
+    # the same seed keeps its road whatever it is dressed as
+    assert generate_world(2_000_003, cfg)["centerline"] == generate_world(2_000_003, FAST)["centerline"]
+
+
 def test_seed_ranges_are_disjoint_and_named():
     for (_, a), (_, b) in combinations(SEED_RANGES.items(), 2):
         assert set(range(a.start, a.stop, 9973)).isdisjoint(b) and (a.stop <= b.start or b.stop <= a.start)

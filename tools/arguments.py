@@ -73,14 +73,17 @@ def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
     return float(m.group(1)), unit
 
 
-def add_camera_argument(parser: argparse.ArgumentParser, default: str) -> None:
-    """``--camera``: which camera rig the headless simulator renders with."""
+def add_camera_argument(parser: argparse.ArgumentParser, default: str | None) -> None:
+    """``--camera``: which camera rig the headless simulator renders with (None: the model's)."""
     from tools.sim.render.camera import RIGS
 
+    said = (f"default {default}" if default else
+            "default: the rig the model learnt from, classic for models made before the unity rig; unity "
+            "without --model")
     parser.add_argument("--camera", choices=tuple(RIGS), default=default,
-                        help="camera rig: classic (the first headless camera, every table so far) or unity "
-                             "(the real simulator's: horizon at row 64, height 1.40 m, its bonnet from row 137) "
-                             "(default %(default)s)")
+                        help="camera rig: unity (the real simulator's: horizon at row 64, height 1.40 m, its "
+                             "bonnet from row 137) or classic (the first headless camera, the paper's tables) "
+                             f"({said})")
 
 
 def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:

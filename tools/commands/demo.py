@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from drive_server.runrecords import write_json
     from tools.console import Progress
     from tools.sim.driving.drivers import SocketDriver
+    from tools.sim.driving.model_rig import model_rig
     from tools.sim.driving.pacing import WallClockPacer, hooks
     from tools.sim.driving.session import run_scenario
     from tools.sim.driving.summary import print_summary
@@ -66,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     stats_path = out / "server_stats.json"
     setup = SETUPS[args.behavior or "simplistic"]  # a specialist's training scene; the generalist's: lake
     config = ScenarioConfig(track=setup.track, cones=setup.cones, cone_seed=setup.cone_seed, laps=args.laps,
-                            speed_limit_kmh=args.speed_limit, vehicle=args.vehicle)
+                            speed_limit_kmh=args.speed_limit, vehicle=args.vehicle, camera=model_rig(model))
     strip = StripCollector(every_s=8.0)
     server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0"],
                            stats_json=stats_path)

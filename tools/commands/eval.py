@@ -11,7 +11,7 @@ from pathlib import Path
 
 from drive_server.model import SteeringModel
 from drive_server.runrecords import code_version, file_sha256, write_json, write_text
-from tools.arguments import add_vehicle_argument
+from tools.arguments import add_camera_argument, add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError
 from tools.evaluate.cluster import BACKENDS, make_runner
@@ -27,6 +27,7 @@ from tools.evaluate.journal import driver_identity, prepare_journal
 from tools.evaluate.report import format_cell, plot_experiments, table9
 from tools.evaluate.runner import DriverSpec, spec_dict
 from tools.evaluate.suite import SuiteConfig, max_runs, run_suite
+from tools.sim.driving.model_rig import resolve_rig
 from tools.sim.track.files import get_track
 from tools.sim.worldgen import world_seed_range
 
@@ -66,6 +67,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
                    help="km/h for every experiment but the speed one (default %(default)s)")
     add_vehicle_argument(p, d.vehicle)
+    add_camera_argument(p, None)
     p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "
@@ -124,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
                                             "driver": driver_identity(spec)}, args.resume)
     cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
-                      map_dir=str(out / "failures"), vehicle=args.vehicle,
+                      map_dir=str(out / "failures"), vehicle=args.vehicle, camera=resolve_rig(args.camera, model),
                       worlds=tuple(worlds_meta["files"].items()) if worlds_meta else ())
     meta = {"model": str(model), "model_resolved": str(model.resolve()), "model_sha256": model_sha,
             "code_version": code_version(),

@@ -50,7 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
     add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
     add_vehicle_argument(p, d.vehicle)
-    add_camera_argument(p, d.camera)
+    add_camera_argument(p, None)
     p.add_argument("--realtime", action="store_true",
                    help="simulated time = the driver's measured latency (default: lock-step, deterministic)")
     p.add_argument("--control-hz", type=float, default=d.control_hz,
@@ -78,6 +78,7 @@ def _driver(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from tools.sim.driving.model_rig import resolve_rig
     from tools.sim.driving.scenario import ScenarioConfig
     from tools.sim.driving.session import run_scenario
     from tools.sim.track.files import get_track
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         light_direction_deg=args.light_direction, cones=args.cones, cone_seed=args.cone_seed, spawn_s=spawn_s,
         yaw_offset_deg=args.yaw_offset, reverse=args.reverse, speed_limit_kmh=args.speed_limit,
         realtime=args.realtime, control_hz=args.control_hz, seed=args.seed, max_lap_time_s=args.max_lap_time,
-        speed_unit=args.speed_unit, vehicle=args.vehicle, camera=args.camera)
+        speed_unit=args.speed_unit, vehicle=args.vehicle, camera=resolve_rig(args.camera, args.model))
     if args.server:
         note = "speed limit: the drive server's own (--speed-limit applies to --model only)"
         if args.speed_limit != ScenarioConfig.speed_limit_kmh:

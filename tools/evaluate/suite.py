@@ -18,6 +18,7 @@ from protocol.facts import DEPLOY_SPEED_KMH
 from tools.evaluate.experiments import EXPERIMENTS, PAPER_EXPERIMENTS, SETUPS, Experiment, is_autonomous, run_eta
 from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
+from tools.sim.render.camera import DEFAULT_RIG
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS
 
 log = logging.getLogger(__name__)
@@ -34,6 +35,7 @@ class SuiteConfig:
     track: str | None = None  # override the behavior's track (e.g. a short test track)
     map_dir: str | None = None
     vehicle: str = VEHICLE_KINDS[0]  # the car model (ScenarioConfig.vehicle)
+    camera: str = DEFAULT_RIG  # the camera rig (ScenarioConfig.camera): rbc eval passes the model's
     overrides: dict[str, Any] = field(default_factory=dict)  # extra ScenarioConfig fields
     worlds: tuple[tuple[int, str], ...] = ()  # (seed, track file) of the unseen_worlds experiment
 
@@ -45,7 +47,8 @@ class SearchStopped(Exception):
 def base_scenario(cfg: SuiteConfig) -> dict[str, Any]:
     setup = SETUPS[cfg.behavior]
     scenario = {"track": cfg.track or setup.track, "laps": cfg.laps, "cones": setup.cones,
-                "cone_seed": setup.cone_seed, "speed_limit_kmh": cfg.speed_limit_kmh, "vehicle": cfg.vehicle}
+                "cone_seed": setup.cone_seed, "speed_limit_kmh": cfg.speed_limit_kmh, "vehicle": cfg.vehicle,
+                "camera": cfg.camera}
     scenario.update(cfg.overrides)
     return scenario
 

@@ -28,6 +28,7 @@ from protocol import SpeedUnit
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, format_row, frame_name, last_row_stamp
 from protocol.facts import CAMERAS, COLLECT_SPEED_KMH
 from protocol.jpeg import encode_jpeg
+from protocol.rigfile import write_rig
 from protocol.units import from_kmh
 from tools.sim.driving.autopilot import Autopilot, AutopilotParams
 from tools.sim.driving.rules import LapResult
@@ -61,7 +62,7 @@ class CollectConfig:
     light_direction_deg: float = 0.0
     sim_fps: int = 60
     vehicle: str = ScenarioConfig.vehicle  # "kinematic" or "dynamic" (tools.sim.vehicle.dynamics)
-    camera: str = ScenarioConfig.camera  # "classic" or "unity" (tools.sim.render.camera.RIGS)
+    camera: str = ScenarioConfig.camera  # "unity" or "classic" (tools.sim.render.camera.RIGS); DIR/camera_rig.json
 
     def __post_init__(self) -> None:
         if self.cameras not in (1, 3):
@@ -147,6 +148,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
         raise ValueError("--resume continues a collection: not with --overwrite or --append")
     kept = kept_rows(out_dir) if resume else []
     first = EPOCH if resume else prepare_output(out_dir, overwrite, append)
+    write_rig(out_dir, config.camera, append=append or resume)  # before any frame: rbc train reads it
     start = first if start is None else start
     result = CollectResult(out_dir=out_dir, rows=0, zero_steer_rows=0)
     directions = (False, True) if config.both_directions else (False,)

@@ -30,6 +30,7 @@ import numpy as np
 
 from drive_server.runrecords import atomic_path, write_json, write_text
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME
+from protocol.rigfile import write_rig
 from tools.sim.collect.backends import WORLD_TIME_SLOT, WorldJob, WorldOutcome, run_jobs
 from tools.sim.collect.dataset import EPOCH, CollectConfig, OutputDirError
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, seed_range_of, world_seed_range
@@ -171,6 +172,7 @@ def collect_worlds(config: CollectConfig, worlds: WorldsConfig, out_dir: Path, w
     plan = {"collect": asdict(replace(config, track="")), "worlds": asdict(worlds),
             "generator_version": GENERATOR_VERSION}
     partial = _prepare(out, json.loads(json.dumps(plan)), overwrite, resume)
+    write_rig(out, config.camera)  # before any frame: rbc train reads which camera they are
     result = WorldsResult(out, worlds.count)
     finished: dict[int, WorldOutcome] = {}
     jobs = []

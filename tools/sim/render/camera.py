@@ -110,15 +110,18 @@ class CameraRig:
     bonnet: bool = False
 
 
-#: The rigs a simulation can use. ``classic``: the first headless camera (every table so far was measured
-#: with it; version-1 tracks render with it byte for byte). ``unity``: the real simulator's camera as
-#: measured on its frames (``tools/drivelog/camera.py``: pitch 6.2 deg so the horizon meets row 64-65,
-#: height 1.40 m, side cameras 0.95 m out) with its bonnet from row 137 (``tools/sim/render/bonnet.py``).
+#: The rigs a simulation can use. ``unity`` (the default): the real simulator's camera as measured on its
+#: frames (``tools/drivelog/camera.py``: pitch 6.2 deg so the horizon meets row 64-65, height 1.40 m, side
+#: cameras 0.95 m out) with its bonnet from row 137 (``tools/sim/render/bonnet.py``). ``classic``: the first
+#: headless camera (the paper's tables and the models trained before the unity rig; version-1 tracks
+#: render with it byte for byte as they always did).
 RIGS: dict[str, CameraRig] = {
     "classic": CameraRig("classic"),
     "unity": CameraRig("unity", height=1.40, pitch_deg=-6.2, side_offset=0.95, bonnet=True),
 }
-DEFAULT_RIG = "classic"
+DEFAULT_RIG = "unity"
+#: The rig of a model whose record names none: every model made before the unity rig learnt classic frames.
+LEGACY_RIG = "classic"
 
 
 def camera_rig(name: str) -> CameraRig:

@@ -14,7 +14,8 @@ from protocol.facts import JPEG_QUALITY
 LINE_COLORS = ("white", "yellow")
 LINE_STYLES = ("solid", "dashed", "none")
 CENTER_COLORS = ("theme", "white", "yellow")  # theme: the theme palette's "dash" colour (version 1)
-VERGES = ("shoulder", "grass", "sand", "dirt", "gravel")  # shoulder: the theme's shoulder colour (version 1)
+#: shoulder: the theme's shoulder colour (version 1); concrete: the real lake's light kerb strip
+VERGES = ("shoulder", "grass", "sand", "dirt", "gravel", "concrete")
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ COMMON: dict[str, RGB] = {
     "gravel": (142, 134, 118), "gravel2": (126, 119, 104),
     "worn": (112, 110, 108), "patch": (70, 70, 74),
     "verge_grass": (84, 120, 54), "verge_sand": (188, 170, 128), "verge_dirt": (128, 104, 76),
-    "verge_gravel": (136, 130, 120),
+    "verge_gravel": (136, 130, 120), "verge_concrete": (150, 166, 172),
 }
 
 # RGB albedo palettes (values before lighting; lighting at the default sun keeps them near these)
@@ -50,6 +50,21 @@ PALETTES: dict[str, dict[str, RGB]] = {
               "verge_grass": (104, 112, 70)},
     "wetland": {**COMMON, "ground": (70, 118, 60), "ground2": (96, 126, 64), "shoulder": (120, 106, 82),
                 "dash": (232, 200, 60), "shore": (112, 112, 80), "water": (44, 82, 100)},
+    # The real Udacity simulator's three tracks, as seen on public recordings of them (median colours of
+    # the frames' regions: `docs/simulator.md`, "Udacity-like themes"); drawn only from procedural
+    # noise, no texture or image of the Unity project or of a recording.
+    "udacity_lake": {**COMMON, "ground": (176, 138, 83), "ground2": (150, 144, 78), "shoulder": (150, 166, 172),
+                     "asphalt": (128, 130, 122), "yellow": (182, 159, 80), "dash": (182, 159, 80),
+                     "shore": (168, 150, 110), "water": (70, 112, 142), "kerb_red": (225, 109, 101),
+                     "kerb_white": (236, 236, 230), "dirt": (176, 138, 83), "rut": (150, 116, 72)},
+    "udacity_jungle": {**COMMON, "ground": (104, 118, 66), "ground2": (86, 104, 52), "shoulder": (112, 122, 77),
+                       "asphalt": (152, 151, 148), "line": (236, 236, 232), "dash": (236, 236, 232),
+                       "shore": (110, 112, 80), "water": (60, 92, 100), "kerb_red": (232, 113, 115),
+                       "verge_grass": (112, 122, 77)},
+    "udacity_mountain": {**COMMON, "ground": (119, 92, 53), "ground2": (140, 110, 48), "shoulder": (139, 111, 48),
+                         "asphalt": (62, 60, 60), "line": (200, 200, 196), "yellow": (139, 111, 48),
+                         "dash": (139, 111, 48), "shore": (96, 86, 70), "water": (40, 60, 72),
+                         "verge_dirt": (119, 92, 53)},
 }
 
 
@@ -96,6 +111,18 @@ SKIES: dict[str, SkyTheme] = {
     "wetland": SkyTheme((196, 210, 218), (76, 126, 196), (
         Ridge(0.3, 1.2, (2, 3, 5, 11), (100, 128, 108), 0.5),
         Ridge(0.2, 0.7, (7, 13, 29), (50, 80, 52), 0.3, jag=0.5))),
+    "udacity_lake": SkyTheme((172, 200, 222), (108, 138, 180), (
+        Ridge(1.0, 4.0, (2, 3, 5, 9, 17), (150, 150, 128), 0.35),  # pale rocky hills
+        Ridge(0.5, 2.5, (3, 5, 11, 23), (120, 112, 70), 0.15),  # nearer grassy mounds
+        Ridge(0.3, 1.0, (7, 13, 29), (40, 58, 34), 0.2, jag=0.9))),  # pine tops
+    "udacity_jungle": SkyTheme((168, 188, 200), (96, 132, 186), (
+        Ridge(6.0, 14.0, (2, 3, 5, 9, 17, 31), (92, 106, 76), 0.2),  # green mountains close by
+        Ridge(3.0, 9.0, (3, 5, 11, 21, 41), (58, 66, 48), 0.1),  # dark rock walls
+        Ridge(0.6, 1.5, (7, 13, 29), (60, 90, 40), 0.1, jag=0.9))),
+    "udacity_mountain": SkyTheme((170, 190, 214), (70, 110, 180), (
+        Ridge(6.0, 16.0, (2, 3, 5, 9, 17, 31, 53), (72, 72, 76), 0.15),  # grey cliffs
+        Ridge(2.0, 6.0, (3, 5, 11, 21), (130, 104, 56), 0.15),  # autumn slopes
+        Ridge(0.4, 1.2, (7, 13, 29), (150, 100, 40), 0.1, jag=0.8))),
 }
 
 
@@ -119,7 +146,14 @@ TREES: dict[str, TreeTheme] = {
     "snow": TreeTheme(0.9, 0.0, 100.0, {0: ((88, 80, 70),), 1: ((34, 62, 44), (60, 80, 70))}),
     "rocky": TreeTheme(0.45, 0.6, 110.0, {0: ((72, 96, 48),), 1: ((40, 66, 44),)}),
     "wetland": TreeTheme(0.1, 0.0, 110.0, {0: ((66, 108, 46), (90, 116, 48)), 1: ((36, 72, 40),)}),
+    "udacity_lake": TreeTheme(0.85, 0.3, 120.0, {0: ((96, 110, 50),), 1: ((40, 62, 36), (56, 74, 40))}),
+    "udacity_jungle": TreeTheme(0.2, 0.4, 90.0, {0: ((70, 110, 40), (96, 126, 52)), 1: ((40, 70, 36),)}),
+    "udacity_mountain": TreeTheme(0.3, 0.6, 100.0, {0: ((176, 110, 36), (206, 160, 50)), 1: ((48, 60, 40),)}),
 }
 
 THEMES = tuple(PALETTES)
 V1_THEMES = ("meadow", "forest")
+#: The look of the real simulator's tracks (its lake, jungle and old mountain track).
+UDACITY_THEMES = ("udacity_lake", "udacity_jungle", "udacity_mountain")
+#: What procedural worlds draw from unless asked otherwise (generator version 1's themes).
+GENERIC_THEMES = tuple(t for t in THEMES if t not in UDACITY_THEMES)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from tools.sim.track.road import MIN_TURN_RADIUS, THEMES
+from tools.sim.track.themes import GENERIC_THEMES
 
 #: Seed ranges, half-open [start, stop). Training and evaluation worlds never share a seed, so a
 #: model is never evaluated on a world it was trained on; ``dev`` is for trying things out.
@@ -53,7 +54,7 @@ class WorldGenConfig:
     # unless both lap at eta 100 %; False skips it (the same world whenever the first candidate passes).
     drive_check: bool = True
     max_candidates: int = 8
-    themes: tuple[str, ...] = THEMES
+    themes: tuple[str, ...] = GENERIC_THEMES  # the Udacity-like themes only when asked for (--themes)
     randomise_appearance: bool = True  # False: the theme's own palette and a plain camera image
 
     def __post_init__(self) -> None:

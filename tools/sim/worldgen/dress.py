@@ -15,7 +15,24 @@ from tools.sim.worldgen.layout import DS, Layout
 
 COLOURED = ("ground", "ground2", "shoulder", "dirt", "water")  # the rest are greys: little hue change
 BASE_SURFACES = (("asphalt", 0.5), ("worn_asphalt", 0.15), ("concrete", 0.12), ("dirt", 0.12), ("gravel", 0.11))
-TREE_HEIGHTS = {"desert": (1.5, 4.0), "forest": (8.0, 17.0), "snow": (6.0, 14.0), "rocky": (3.0, 10.0)}
+TREE_HEIGHTS = {"desert": (1.5, 4.0), "forest": (8.0, 17.0), "snow": (6.0, 14.0), "rocky": (3.0, 10.0),
+                "udacity_lake": (5.0, 14.0), "udacity_jungle": (6.0, 16.0)}
+#: Markings of the Udacity-like themes, as on the real tracks: the lake's yellow edge lines and light
+#: concrete kerb strip, the jungle's white edge lines and dashed white centre line, the mountain's bare
+#: road between leaf-strewn verges. (Generic themes draw theirs at random.)
+UDACITY_EDGES = {
+    "udacity_lake": {"line_color": "yellow", "line_style": "solid", "center_color": "yellow",
+                     "center_style": "none", "verge": "concrete"},
+    "udacity_jungle": {"line_color": "white", "line_style": "solid", "center_color": "white",
+                       "center_style": "dashed", "verge": "grass"},
+    "udacity_mountain": {"line_color": "yellow", "line_style": "none", "center_color": "white",
+                         "center_style": "none", "verge": "shoulder"},
+}
+#: Red-and-white kerbs on sharp curves: share of worlds (the real lake has them on most curves).
+KERB_SHARE = {"udacity_lake": 0.8}
+#: Fine texture grain of the ground, per theme (the real tracks' asphalt is coarse; the lake's near road
+#: matched the real one's edge density at about 3x, docs/simulator.md).
+GRAIN = {"udacity_lake": (2.0, 3.0), "udacity_jungle": (1.0, 2.5), "udacity_mountain": (1.5, 3.0)}
 DENSITY_PER_KM = (("bare", 0.12, 0, 0), ("sparse", 0.33, 30, 120), ("medium", 0.33, 120, 320),
                   ("dense", 0.22, 320, 650))
 
@@ -31,8 +48,10 @@ def _jitter_rgb(rng: np.random.Generator, rgb, spread: float, chroma: float = 0.
     return [int(np.clip(round(c * g), 0, 255)) for c, g in zip(rgb, gain, strict=True)]
 
 
-def surfaces(rng: np.random.Generator, length: float) -> list[dict]:
-    """A base kind for the whole loop and up to four stretches of other kinds."""
+def surfaces(rng: np.random.Generator, length: float, theme: str) -> list[dict]:
+    """A base kind for the whole loop and up to four stretches of other kinds (Udacity-like: asphalt only)."""
+    if theme in UDACITY_EDGES:
+        return []
     base = _pick(rng, BASE_SURFACES)
     out = [{"from_s": 0.0, "to_s": round(length - 0.01, 2), "kind": base}] if base != "asphalt" else []
     for _ in range(int(rng.choice([0, 0, 1, 2, 3, 4]))):
@@ -43,7 +62,9 @@ def surfaces(rng: np.random.Generator, length: float) -> list[dict]:
     return out
 
 
-def edges(rng: np.random.Generator) -> dict:
+def edges(rng: np.random.Generator, theme: str) -> dict:
+    if theme in UDACITY_EDGES:
+        return {**UDACITY_EDGES[theme], "barriers": bool(rng.uniform() < 0.35)}
     return {"line_color": str(rng.choice(["white", "yellow"], p=[0.7, 0.3])),
             "line_style": str(rng.choice(["solid", "dashed", "none"], p=[0.6, 0.2, 0.2])),
             "center_color": str(rng.choice(["theme", "white", "yellow"], p=[0.4, 0.3, 0.3])),
@@ -111,7 +132,7 @@ def scenery(rng: np.random.Generator, theme: str, length: float, edge: float) ->
     count = int(rng.uniform(lo, hi) * length / 1000) if hi else 0
     h_lo, h_hi = TREE_HEIGHTS.get(theme, (4.0, 12.0))
     near = edge + float(rng.uniform(1.5, 6.0))
-    out = {"theme": theme, "kerbs": bool(rng.uniform() < 0.3),
+    out = {"theme": theme, "kerbs": bool(rng.uniform() < KERB_SHARE.get(theme, 0.3)),
            "trees": {"count": count, "seed": int(rng.integers(2**31)), "min_offset": round(near, 2),
                      "max_offset": round(near + float(rng.uniform(15, 60)), 2),
                      "min_height": h_lo, "max_height": h_hi}}
@@ -137,7 +158,8 @@ def appearance(rng: np.random.Generator, theme: str) -> dict:
     noise = 0.0 if rng.uniform() < 0.4 else float(rng.uniform(0.5, 4.0))
     return {"seed": int(rng.integers(2**31)),
             "palette": {k: _jitter_rgb(rng, pal[k], 0.12, 0.5 if k in COLOURED else 0.12) for k in keys},
-            "grain": round(float(rng.uniform(0.5, 1.6)), 3), "texture_scale": round(float(rng.uniform(0.6, 2.0)), 3),
+            "grain": round(float(rng.uniform(*GRAIN.get(theme, (0.5, 1.6)))), 3),
+            "texture_scale": round(float(rng.uniform(0.6, 2.0)), 3),
             "exposure_ev": round(float(np.clip(rng.normal(0, 0.25), -0.6, 0.6)), 3),
             "contrast": round(float(rng.uniform(0.85, 1.2)), 3),
             "white_balance": [round(1 + t, 3), round(1 + float(rng.uniform(-0.03, 0.03)), 3), round(1 - t, 3)],

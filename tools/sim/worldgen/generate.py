@@ -68,7 +68,7 @@ def _candidate(seed: int, candidate: int, config: WorldGenConfig) -> dict:
     rng = np.random.default_rng([seed, GENERATOR_VERSION, 2, candidate])
     theme = str(rng.choice(config.themes))
     edge = width / 2 + shoulder
-    surfaces = dress.surfaces(rng, length)
+    surfaces = dress.surfaces(rng, length, theme)
     ponds, bridges = dress.water(rng, lay, theme, keep_off=edge + 3.0, half_deck=width / 2 + 0.7)
     scenery = dress.scenery(rng, theme, length, edge)
     scenery["water"] = ponds
@@ -77,7 +77,7 @@ def _candidate(seed: int, candidate: int, config: WorldGenConfig) -> dict:
     bumpy = rng.uniform() < 0.5
     jitter = {"pitch_deg": round(float(rng.uniform(0, 0.8)), 2) if bumpy else 0.0,
               "roll_deg": round(float(rng.uniform(0, 0.6)), 2) if bumpy else 0.0}
-    edges, sky = dress.edges(rng), dress.sky(rng, theme)
+    edges, sky = dress.edges(rng, theme), dress.sky(rng, theme)
     look = dress.appearance(rng, theme) if config.randomise_appearance else {}
     step = int(round(CONTROL_SPACING_M / DS))
     where = seed_range_of(seed) or "no reserved range"

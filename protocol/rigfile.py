@@ -1,0 +1,58 @@
+"""Which camera a recording's frames were taken with: ``camera_rig.json`` beside its driving log.
+
+``rbc collect`` writes it (the headless simulator has two camera rigs, ``classic`` and ``unity``);
+``rbc train`` reads it for every ``--data`` folder and stamps the one rig of its data into the model, so
+the headless simulator later shows a model the camera it learnt from. A folder without the file is a
+recording of the real simulator (or of drive_server serving it): Unity's own camera, ``unity``.
+Stdlib only.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterable
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+RIG_FILE = "camera_rig.json"
+#: The rig of frames recorded without a rig file: the real simulator's camera.
+REAL_RIG = "unity"
+#: What a folder of frames from more than one rig, or data of several rigs, records.
+MIXED = ""
+
+
+def _folder(data: Path) -> Path:
+    data = Path(data)
+    return data.parent if data.suffix.lower() == ".csv" else data
+
+
+def read_rig(data: Path) -> str:
+    """The rig of the recording in ``data`` (a folder, or its log file); :data:`REAL_RIG` without a rig file."""
+    path = _folder(data) / RIG_FILE
+    try:
+        value = json.loads(path.read_text(encoding="utf-8")).get("rig", REAL_RIG)
+    except FileNotFoundError:
+        return REAL_RIG
+    except (OSError, ValueError, AttributeError):
+        log.warning("%s: unreadable, taking the frames for the real simulator's camera", path)
+        return REAL_RIG
+    return value if isinstance(value, str) else REAL_RIG
+
+
+def write_rig(folder: Path, rig: str, append: bool = False) -> None:
+    """Record ``rig`` for the frames in ``folder``; appending frames of another rig records :data:`MIXED`."""
+    folder = Path(folder)
+    if append and (folder / RIG_FILE).is_file() and read_rig(folder) != rig:
+        rig = MIXED
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / (RIG_FILE + ".tmp")
+    tmp.write_text(json.dumps({"rig": rig}) + "\n", encoding="utf-8")
+    tmp.replace(folder / RIG_FILE)
+
+
+def data_rig(sources: Iterable[Path]) -> str:
+    """The one rig of all ``sources``, or :data:`MIXED` when they differ."""
+    rigs = {read_rig(s) for s in sources}
+    return rigs.pop() if len(rigs) == 1 else MIXED
