@@ -57,7 +57,8 @@ def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name:
           f"{lap['mean_speed_kmh']:.1f} km/h mean (limit {sc['speed_limit_kmh']:g}), "
           f"cross-track error RMS {lap['cte_rms_m']:.2f} m |",
         "",
-        "Reproduce (one command; deterministic per seed):",
+        f"Reproduce ({'one command' if len(recipe.strip().splitlines()) == 1 else 'these commands'}; "
+        "deterministic per seed):",
         "",
         "```bash",
         recipe,

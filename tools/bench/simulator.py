@@ -80,7 +80,7 @@ def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None
         t0 = time.perf_counter()
         world = get_world(track, cones=cones)
         print(f"\n{label}: world build {time.perf_counter() - t0:.2f} s")
-    renderer = Renderer(world)
+    renderer = Renderer(world, rig=args.camera)
     poses = driving_poses(track, args.frames)
     best, cpu = _time_frames(lambda p: renderer.render(p, "center"), poses, args.repeats)
     print(f"  centre camera: {best:6.0f} frames/s wall ({1e3 / best:.2f} ms/frame), {cpu:.0f} frames per CPU-second")

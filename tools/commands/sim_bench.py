@@ -10,8 +10,10 @@ from pathlib import Path
 
 import cv2
 
+from tools.arguments import add_camera_argument
 from tools.bench.simulator import bench_track, lap_wall_time, write_sheet
 from tools.bench.vehicle_models import inprocess_loop, physics_step_costs
+from tools.sim.render.camera import DEFAULT_RIG
 from tools.sim.track.cones import place_cones
 from tools.sim.track.files import load_track
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS
@@ -23,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=600, help="frames per timing run (default 600)")
     parser.add_argument("--repeats", type=int, default=3, help="timing runs; the best is reported (default 3)")
     parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1: per-core numbers)")
+    add_camera_argument(parser, DEFAULT_RIG)
     parser.add_argument("--cones", type=int, default=20, help="cones for the lake-with-cones run (default 20)")
     parser.add_argument("--seed", type=int, default=1, help="cone placement seed (default 1)")
     parser.add_argument("--sheet", type=Path, default=Path("out/sim_sheet.png"),
@@ -35,7 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     cv2.setNumThreads(args.threads)
-    print(f"rbc sim-bench: 320x160 RGB, OpenCV threads {args.threads}, best of {args.repeats} x {args.frames} frames")
+    print(f"rbc sim-bench: 320x160 RGB, {args.camera} camera rig, OpenCV threads {args.threads}, "
+          f"best of {args.repeats} x {args.frames} frames")
     from tools.sim.worldgen.generate import resolve_track_name
 
     args.tracks = [resolve_track_name(t) for t in args.tracks]  # world:SEED -> its file
