@@ -14,6 +14,8 @@ import logging
 from collections.abc import Iterable
 from pathlib import Path
 
+from protocol.datalog import LOG_NAMES
+
 log = logging.getLogger(__name__)
 
 RIG_FILE = "camera_rig.json"
@@ -44,7 +46,8 @@ def read_rig(data: Path) -> str:
 def write_rig(folder: Path, rig: str, append: bool = False) -> None:
     """Record ``rig`` for the frames in ``folder``; appending frames of another rig records :data:`MIXED`."""
     folder = Path(folder)
-    if append and (folder / RIG_FILE).is_file() and read_rig(folder) != rig:
+    earlier = (folder / RIG_FILE).is_file() or any((folder / name).is_file() for name in LOG_NAMES)
+    if append and earlier and read_rig(folder) != rig:  # a real recording has no rig file: unity
         rig = MIXED
     folder.mkdir(parents=True, exist_ok=True)
     tmp = folder / (RIG_FILE + ".tmp")

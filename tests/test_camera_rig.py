@@ -26,6 +26,13 @@ def test_a_folder_without_a_rig_file_is_the_real_simulators_camera(tmp_path):
     assert read_rig(tmp_path) == MIXED
     (tmp_path / RIG_FILE).write_text("{not json", encoding="utf-8")
     assert read_rig(tmp_path) == REAL_RIG  # unreadable: a warning, the real camera
+    real = tmp_path / "real"  # frames of the real simulator (a log, no rig file), then classic ones appended
+    real.mkdir()
+    (real / "driving_log.csv").write_text("", encoding="utf-8")
+    write_rig(real, "classic", append=True)
+    assert read_rig(real) == MIXED
+    write_rig(tmp_path / "new", "classic", append=True)  # appending to nothing: just the rig
+    assert read_rig(tmp_path / "new") == "classic"
     other = tmp_path / "other"
     write_rig(other, "classic")
     assert data_rig([other, other / "driving_log.csv"]) == "classic"
