@@ -54,7 +54,7 @@ class WorldGenConfig:
     # unless both lap at eta 100 %; False skips it (the same world whenever the first candidate passes).
     drive_check: bool = True
     max_candidates: int = 8
-    themes: tuple[str, ...] = GENERIC_THEMES  # the Udacity-like themes only when asked for (--themes)
+    themes: tuple[str, ...] = GENERIC_THEMES  # the Udacity-like themes only when asked for (--world-config)
     randomise_appearance: bool = True  # False: the theme's own palette and a plain camera image
 
     def __post_init__(self) -> None:

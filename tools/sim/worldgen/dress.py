@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from tools.sim.track.themes import PALETTES, SKIES
+from tools.sim.track.themes import PALETTES, SKIES, UDACITY_THEMES
 from tools.sim.worldgen.layout import DS, Layout
 
 COLOURED = ("ground", "ground2", "shoulder", "dirt", "water")  # the rest are greys: little hue change
@@ -50,7 +50,7 @@ def _jitter_rgb(rng: np.random.Generator, rgb, spread: float, chroma: float = 0.
 
 def surfaces(rng: np.random.Generator, length: float, theme: str) -> list[dict]:
     """A base kind for the whole loop and up to four stretches of other kinds (Udacity-like: asphalt only)."""
-    if theme in UDACITY_EDGES:
+    if theme in UDACITY_THEMES:
         return []
     base = _pick(rng, BASE_SURFACES)
     out = [{"from_s": 0.0, "to_s": round(length - 0.01, 2), "kind": base}] if base != "asphalt" else []
