@@ -48,6 +48,13 @@ class AugmentSpec:
     yaw: float = 0.0
     yaw_range_deg: float = 6.0
     yaw_gain: float = 1.0
+    # not in the paper: a pull towards the road's middle where a camera stands more than edge_margin_m off it,
+    # edge_gain steering per metre beyond the margin, each camera at its own offset (the side cameras
+    # side_camera_m to each side); drivers each hold a line of their own within about +-2 m of the middle,
+    # so the pull leaves their steering alone and acts where the car nears an edge (0: off)
+    edge_gain: float = 0.0
+    edge_margin_m: float = 1.5
+    side_camera_m: float = 0.95
     camera_vfov_deg: float = 60.0  # the Unity camera's vertical field of view (design card)
     camera_pitch_deg: float = 6.2  # measured on real side cameras (rbc drive-log --calibrate)
 
@@ -114,11 +121,24 @@ def perspective_label(steering: np.ndarray | float, camera: np.ndarray | int, ga
     return np.clip(np.degrees(out) / MAX_STEERING_DEG, -1.0, 1.0)
 
 
+def edge_pull(middles: np.ndarray, camera: np.ndarray, spec: AugmentSpec) -> np.ndarray:
+    """Steering towards the road's middle for cameras beyond ``spec.edge_margin_m`` from it (+ right).
+
+    ``middles`` is where the middle lies from the centre camera (m, + right; NaN: unknown, no pull); from
+    the left camera it lies ``side_camera_m`` further right, from the right one as much further left.
+    """
+    side = np.where(camera == LEFT, spec.side_camera_m, np.where(camera == RIGHT, -spec.side_camera_m, 0.0))
+    middle = np.asarray(middles, np.float64) + side
+    pull = spec.edge_gain * np.sign(middle) * np.maximum(0.0, np.abs(middle) - spec.edge_margin_m)
+    return np.nan_to_num(pull, nan=0.0)  # NaN: a recording without a road file
+
+
 def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, rng: np.random.Generator,
-                ) -> AugParams:
+                middles: np.ndarray | None = None) -> AugParams:
     """Draw every augmentation decision of a batch (Table 5 probabilities), in the paper's order.
 
     All arrays are drawn whether used or not, so a batch consumes the generator identically.
+    ``middles`` (m, + right, per sample: the road's middle from the centre camera) feeds the edge pull.
     """
     n = len(steering)
     steering = np.asarray(steering, dtype=np.float64)
@@ -127,6 +147,8 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
     camera = np.where(sides & (u < spec.perspective / 2), LEFT,
                       np.where(sides & (u < spec.perspective), RIGHT, CENTER)).astype(np.int8)
     label = perspective_label(steering, camera, spec.gamma)
+    if spec.edge_gain > 0 and middles is not None:  # before the flip, which mirrors the road too
+        label = np.clip(label + edge_pull(middles, camera, spec), -1.0, 1.0)
 
     shadow = rng.random(n) < spec.shadow
     xs = rng.integers(spec.shadow_x[0], spec.shadow_x[1], size=(n, spec.shadow_count, 4), endpoint=True)

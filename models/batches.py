@@ -32,6 +32,7 @@ class TrainingSet:
     deletion_rate: float
     batch_size: int
     groups: np.ndarray | None = None  # recording id per sample, aligned with ``indices``: balance recordings
+    middles: np.ndarray | None = None  # the road's middle from the camera (m), aligned with ``indices``: edge pull
 
 
 def epoch_batches(augmenter: FastAugmenter, data: TrainingSet, seed: int, epoch: int, start: int,
@@ -41,7 +42,8 @@ def epoch_batches(augmenter: FastAugmenter, data: TrainingSet, seed: int, epoch:
                            np.random.default_rng([seed, epoch, _INDEX_STREAM]), data.groups)
     for step, local in enumerate(itertools.islice(stream, start, stop), start=start):
         rng = np.random.default_rng([seed, epoch, _AUGMENT, step])
-        x, y = augment_batch(augmenter, data.indices[local], data.steering[local], data.has_sides[local], rng)
+        x, y = augment_batch(augmenter, data.indices[local], data.steering[local], data.has_sides[local], rng,
+                             None if data.middles is None else data.middles[local])
         yield step, x, y
 
 

@@ -94,7 +94,8 @@ def shard(data: TrainingSet, world: World) -> TrainingSet:
     take = slice(world.rank, None, world.size)
     return replace(data, indices=data.indices[take], steering=data.steering[take], has_sides=data.has_sides[take],
                    batch_size=data.batch_size // world.size,
-                   groups=None if data.groups is None else data.groups[take])
+                   groups=None if data.groups is None else data.groups[take],
+                   middles=None if data.middles is None else data.middles[take])
 
 
 def rank_seed(seed: int, world: World) -> int:

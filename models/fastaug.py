@@ -175,13 +175,14 @@ def training_contract(contract: PreprocessContract) -> PreprocessContract:
 
 
 def augment_batch(augmenter: FastAugmenter, idx: np.ndarray, steering: np.ndarray, has_sides: np.ndarray,
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                  rng: np.random.Generator, middles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One training batch: draw, augment, preprocess. Returns (x float32 NCHW, y float32 (n, 1)).
 
-    ``idx`` are frame-cache positions; ``steering`` and ``has_sides`` belong to those samples.
+    ``idx`` are frame-cache positions; ``steering``, ``has_sides`` and ``middles`` (the road's middle,
+    for the edge pull; None: none) belong to those samples.
     """
     t = time.perf_counter()
-    params = draw_params(steering, has_sides, augmenter.spec, rng)
+    params = draw_params(steering, has_sides, augmenter.spec, rng, middles)
     t = augmenter.lap("draw", t)
     images = augmenter.images(idx, params)
     t = time.perf_counter()

@@ -116,7 +116,8 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
     log.info("%s", data.summary(config.data_options()))
     augmenter = FastAugmenter(data.cache, pipeline.augment)
     tset = TrainingSet(data.train, data.targets[data.train], data.has_sides[data.train], pipeline.deletion_rate,
-                       config.batch_size, data.recording_groups(data.train) if config.balance_recordings else None)
+                       config.batch_size, data.recording_groups(data.train) if config.balance_recordings else None,
+                       None if data.middles is None else data.middles[data.train])
     tset = ddp.shard(tset, world)  # this rank's samples and share of the batch (all of both in one process)
     log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
              config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,

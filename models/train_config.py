@@ -80,6 +80,10 @@ class TrainConfig:
     label_lag: int = 0  # train on the steering recorded this many frames after the frame
     # not in the paper: labels plus this much steering per metre towards the road's middle (rbc data road)
     centre_gain: float = 0.0
+    # not in the paper: edge_gain steering per metre that a camera (each at its own offset) stands beyond
+    # edge_margin metres from the road's middle, towards it (rbc data road; 0: off)
+    edge_gain: float = 0.0
+    edge_margin: float = 1.5
     # side-camera label correction: the distance (m) in which a car 0.95 m off would be back (Eq. 4/5: gamma =
     # 0.95 / this); None: the paper's 10 m. Shorter teaches a stronger pull back to the centre line
     recovery_distance: float | None = None
@@ -110,6 +114,10 @@ class TrainConfig:
             raise ValueError(f"yaw gain must be 0..5, got {self.yaw_gain}")
         if not 0.0 <= self.centre_gain <= 1.0:
             raise ValueError(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
+        if not 0.0 <= self.edge_gain <= 1.0:
+            raise ValueError(f"edge gain must be 0..1 steering per metre, got {self.edge_gain}")
+        if not 0.0 <= self.edge_margin <= 10.0:
+            raise ValueError(f"edge margin must be 0..10 m, got {self.edge_margin}")
         if not 0 <= self.label_lag <= 100:
             raise ValueError(f"label lag must be 0..100 frames, got {self.label_lag}")
         if not 1 <= self.row_stride <= 1000:
@@ -137,7 +145,7 @@ class TrainConfig:
     def data_options(self) -> DataOptions:
         return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels,
                            self.row_stride, tuple(self.val_data), self.balance_recordings, self.label_lag,
-                           self.centre_gain)
+                           self.centre_gain, self.edge_gain > 0)
 
     def pipeline(self) -> Pipeline:
         """The behavior's pipeline with this run's crop and brightness settings applied."""
@@ -154,4 +162,7 @@ class TrainConfig:
         if self.yaw_aug > 0:
             augment = replace(augment, yaw=self.yaw_aug, yaw_range_deg=self.yaw_range, yaw_gain=self.yaw_gain)
             contract = replace(contract, blank_columns=turned_edge_columns(augment, contract))
+        if self.edge_gain > 0:
+            augment = replace(augment, edge_gain=self.edge_gain, edge_margin_m=self.edge_margin,
+                              side_camera_m=SIDE_CAMERA_OFFSET_M)
         return replace(p, contract=contract, augment=augment)

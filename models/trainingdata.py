@@ -41,6 +41,8 @@ class DataOptions:
     # recording's road file, rbc data road): drivers each hold a line of their own on a wide road, so the image
     # cannot say how far the car is from that line, only from the road's middle
     centre_gain: float = 0.0
+    # keep each sample's road middle (from the road files) for the edge pull of the augmentation
+    road_middles: bool = False
 
     def slow(self, speeds: np.ndarray) -> np.ndarray:
         """Rows slower than ``min_speed``, comparing both speeds in km/h."""
@@ -61,6 +63,7 @@ class PreparedData:
     counts: dict[str, int] = field(default_factory=dict)
     split: SplitSpec = field(default_factory=SplitSpec)
     labels: np.ndarray | None = None  # training targets (smoothed steering), every sample; None: ``steering``
+    middles: np.ndarray | None = None  # the road's middle from the centre camera (m, + right), every sample
     recording: np.ndarray | None = None  # index of each sample's log in ``dataset.reports``
 
     def recording_groups(self, positions: np.ndarray) -> np.ndarray:
@@ -130,27 +133,43 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     if options.smooth_frames > 1:
         labels = smooth_labels(dataset, steering if labels is None else labels, options.smooth_frames,
                                np.isin(np.arange(len(steering)), train))
+    middles = None
+    if options.centre_gain or options.road_middles:
+        middles = road_middles(dataset, missing_ok=not options.centre_gain)
     if options.centre_gain:
         labels = np.clip((steering if labels is None else labels)
-                         + options.centre_gain * road_middles(dataset), -1.0, 1.0).astype(np.float32)
-    return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels, recording)
+                         + options.centre_gain * middles, -1.0, 1.0).astype(np.float32)
+    return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels,
+                        recording=recording, middles=middles if options.road_middles else None)
 
 
-def road_middles(dataset: DataSet) -> np.ndarray:
-    """Per sample, the road's middle from the camera (m, + right), from each log's road file."""
+def road_middles(dataset: DataSet, missing_ok: bool = False) -> np.ndarray:
+    """Per sample, the road's middle from the camera (m, + right), from each log's road file.
+
+    ``missing_ok``: a log without a road file gives NaN (the edge pull leaves it alone: a two-lane road's
+    driver keeps to one lane, not the middle, so only some recordings should be pulled); else an error.
+    """
     from models.roadfile import ROAD_FILE, read_road_middles, road_file_for
 
     out = np.zeros(len(dataset.samples), np.float32)
-    middles: dict[Path, dict[str, float]] = {}
+    middles: dict[Path, dict[str, float] | None] = {}
     for i, sample in enumerate(dataset.samples):
-        log = Path(sample.log)
-        if log not in middles:
-            path = road_file_for(log)
-            if not path.is_file():
-                raise DataLogError(f"{log.parent} has no {ROAD_FILE}: the centre gain needs the road's edges "
-                                   f"(find them first: rbc data road {log.parent})")
-            middles[log] = read_road_middles(path)
-        out[i] = middles[log].get(Path(sample.center).name, 0.0)
+        log_path = Path(sample.log)
+        if log_path not in middles:
+            path = road_file_for(log_path)
+            if not path.is_file() and not missing_ok:
+                raise DataLogError(f"{log_path.parent} has no {ROAD_FILE}: the centre gain needs the road's edges "
+                                   f"(find them first: rbc data road {log_path.parent})")
+            middles[log_path] = read_road_middles(path) if path.is_file() else None
+        table = middles[log_path]
+        out[i] = np.nan if table is None else table.get(Path(sample.center).name, 0.0)
+    missing = [str(p.parent) for p, table in middles.items() if table is None]
+    if missing and len(missing) == len(middles):
+        raise DataLogError(f"no recording has a {ROAD_FILE}: the edge pull needs the road's edges "
+                           f"(find them first: rbc data road {missing[0]})")
+    if missing:
+        log.warning("%d of %d recordings have no %s and get no edge pull: %s", len(missing), len(middles), ROAD_FILE,
+                    ", ".join(missing))
     return out
 
 

@@ -29,23 +29,25 @@ def test_the_model_is_the_one_of_the_recordings_fold() -> None:
 def test_a_lake_recording_is_scored_open_and_closed_loop() -> None:
     s = score_recording(_rec(), DATA, MODEL)
     assert s.frames == 36 and s.zero_mse > 0 and -1 <= s.pearson_r <= 1
+    assert -1 <= s.r_to_intent <= 1 and s.r_to_intent != s.pearson_r and 0 < s.intent_r < 1
     assert s.eta is not None and 0 <= s.eta <= 100 and s.interventions >= 0 and s.seconds_per_takeover > 0
     jungle = score_recording(_rec(track="jungle"), DATA, MODEL)  # hills: not re-projected over flat ground
     assert jungle.eta is None and jungle.mse == s.mse
 
 
 def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
-    scores = [RecordingScore("a", "lake", "A", "m", 10, 0.05, 0.04, 0.5, 20.0, 3, 8.0),
-              RecordingScore("b", "lake", "B", "m", 10, 0.02, 0.03, 0.3, 40.0, 1, 12.0),
+    scores = [RecordingScore("a", "lake", "A", "m", 10, 0.05, 0.04, 0.5, 20.0, 3, 8.0, 0.6, 0.8),
+              RecordingScore("b", "lake", "B", "m", 10, 0.02, 0.03, 0.3, 40.0, 1, 12.0, 0.4, 0.6),
               RecordingScore("c", "jungle", "A", "m", 10, 0.2, 0.1, 0.6)]
     lake, jungle = summarise(scores)
     assert (lake.recordings, lake.mean_r, lake.beats_zero, lake.mean_eta) == (2, 0.4, 1, 30.0)
-    assert jungle.mean_eta is None and jungle.beats_zero == 1
+    assert (lake.mean_r_to_intent, lake.mean_intent_r) == (0.5, 0.7)
+    assert jungle.mean_eta is None and jungle.beats_zero == 1 and jungle.mean_intent_r is None
     text = format_tables(scores, peer=scores[:1])
-    assert "| lake | 2 | 0.40 | 1 of 2 | 30.0 | 10.0 | 0.50 | 1 of 1 | 20.0 | 8.0 |" in text
-    assert "| a | lake | A | 10 | 0.0500 | **0.0400** | 0.50 | 20.0 (3; 8.0 s) | **0.0400** |" in text
+    assert "| lake | 2 | 0.70 | 0.40 | 0.50 | 1 of 2 | 30.0 | 10.0 | 0.50 | 0.60 | 1 of 1 | 20.0 | 8.0 |" in text
+    assert "| a | lake | A | 10 | 0.0500 | **0.0400** | 0.50 | 0.80 | 0.60 | 20.0 (3; 8.0 s) | **0.0400** |" in text
     assert "| b | lake | B | 10 | 0.0200 | 0.0300 |" in text  # not bold: always-0 is better
-    assert "| jungle | 1 | 0.60 | 1 of 1 | – | – | – | – | – | – |" in text
+    assert "| jungle | 1 | – | 0.60 | – | 1 of 1 | – | – | – | – | – | – | – |" in text
 
 
 def test_the_command_names_a_missing_fold_model_in_one_line(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from models.labels import centred_average
 from protocol.datalog import read_log
 from protocol.datalog_writer import LogWriter, frame_name, parse_frame_stamp
 from tests.conftest import UDACITY_SAMPLE
@@ -22,7 +23,7 @@ from tools.realdata import recordings
 from tools.realdata.recordings import PublicRecording, public_recordings, select
 from tools.realdata.rows import RowRange, parse_rows
 from tools.realdata.stamps import frame_time, session_ids
-from tools.realdata.stats import steering_input
+from tools.realdata.stats import INTENT_FRAMES, intent_r, steering_input
 
 REPO = Path(__file__).resolve().parents[1]
 needs_git = pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
@@ -129,6 +130,18 @@ def test_stats_tells_a_mouse_driver_and_counts_missing_frames_and_sessions(tmp_p
     assert m["rows"] == 36 and m["rows_with_sides"] == 0 and m["missing_images"] == 72 and m["sessions"] == 2
     assert k["rows"] == 37 and k["duplicates"] == 1 and k["sessions"] == 1
     assert doc["total"]["rows"] == 73 and doc["total"]["sessions"] == 3
+    # the mouse driver's steering is nearly all intent; the keyboard's taps are mostly not
+    assert m["intent_r"] > 0.95 and k["intent_r"] < 0.6
+    assert min(k["intent_r"], m["intent_r"]) < doc["total"]["intent_r"] < 1
+
+
+def test_intent_r_is_the_r_a_model_predicting_the_drivers_average_would_score():
+    taps = np.zeros(200)
+    taps[::10] = -0.4  # a keyboard driver tapping once a second on a long bend
+    average = centred_average(taps, INTENT_FRAMES)
+    assert intent_r(taps, average) == pytest.approx(np.corrcoef(taps, average)[0, 1])
+    assert intent_r(taps, average) < 0.5
+    assert intent_r(np.zeros(10), np.zeros(10)) is None
 
 
 def test_stats_bad_input_is_one_line(tmp_path, capsys):

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.datalog import read_log
+from protocol.datalog import DataLogError, read_log
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, ViewSynthesizer, _pitch, ground_to_pixels
 from tools.drivelog.loop import LoopRules, _view, lane_limits
@@ -167,3 +167,64 @@ def test_an_unknown_lane_rule_or_view_source_is_refused() -> None:
         LoopRules(lane="lanes")
     with pytest.raises(ValueError, match="views"):
         LoopRules(views="left")
+
+
+def test_the_edge_pull_acts_beyond_the_margin_each_camera_at_its_own_offset() -> None:
+    from models.augment import CENTER, LEFT, RIGHT, AugmentSpec, edge_pull
+
+    spec = AugmentSpec(edge_gain=0.2, edge_margin_m=1.5, side_camera_m=1.0)
+    middles = np.array([0.5, 0.5, 0.5, -2.0, 2.0])  # the road's middle from the centre camera, + right
+    camera = np.array([CENTER, LEFT, RIGHT, CENTER, CENTER])
+    pull = edge_pull(middles, camera, spec)
+    # within the margin nothing; the left camera stands 1.5 m left of the middle: still nothing; 2 m: 0.5 m over
+    assert np.allclose(pull, [0.0, 0.0, 0.0, -0.1, 0.1])
+    assert np.allclose(edge_pull(np.array([1.0]), np.array([LEFT]), spec), [0.1])  # 2.5 m left of it: steer right
+    assert np.allclose(edge_pull(np.array([-1.0]), np.array([RIGHT]), spec), [-0.1])
+    assert np.array_equal(edge_pull(np.array([np.nan]), np.array([CENTER]), spec), [0.0])
+
+
+def test_the_edge_pull_moves_labels_only_where_asked_and_draws_nothing(tmp_path: Path) -> None:
+    from models.augment import AugmentSpec, draw_params
+
+    steering, sides = np.zeros(64), np.ones(64, bool)
+    middles = np.linspace(-3, 3, 64)
+    plain = draw_params(steering, sides, AugmentSpec(), np.random.default_rng(0), middles)
+    pulled = draw_params(steering, sides, AugmentSpec(edge_gain=0.3), np.random.default_rng(0), middles)
+    assert np.array_equal(plain.camera, pulled.camera) and np.array_equal(plain.flip, pulled.flip)
+    moved = plain.steering != pulled.steering
+    assert moved.any() and not moved.all()
+    # a flipped centre frame sees the mirrored road: its pull is mirrored with it
+    diff = (pulled.steering - plain.steering)[moved]
+    want = np.sign(middles[moved]) * np.where(pulled.flip[moved], -1, 1)
+    assert np.all(np.sign(diff) == want)
+
+
+def test_rbc_train_keeps_the_road_middles_for_the_edge_pull(tmp_path: Path) -> None:
+    from models.behavior import pipeline_for
+    from models.trainingdata import DataOptions, prepare_data
+
+    data = _sample_with_road(tmp_path)
+    pipeline = pipeline_for("simplistic", "shallow", "ours")
+    plain = prepare_data([data], pipeline, 2, DataOptions(), workers=1)
+    kept = prepare_data([data], pipeline, 2, DataOptions(road_middles=True), workers=1)
+    assert plain.middles is None and kept.middles is not None and np.any(kept.middles != 0)
+    assert np.array_equal(kept.targets, plain.targets)  # the pull is drawn per batch, with the camera
+    bare = tmp_path / "bare"  # a recording without a road file (a two-lane road: keep its lane) is not pulled
+    shutil.copytree(SAMPLE, bare)
+    both = prepare_data([data, bare], pipeline, 2, DataOptions(road_middles=True), workers=1)
+    unknown = np.isnan(both.middles)
+    assert unknown.sum() == len(both.middles) // 2 and not np.isnan(both.middles[~unknown]).any()
+    with pytest.raises(DataLogError, match="no recording has a road_edges.csv"):
+        prepare_data([bare], pipeline, 2, DataOptions(road_middles=True), workers=1)
+
+
+def test_the_edge_gain_reaches_the_augmentation_and_a_bad_one_is_refused(tmp_path: Path) -> None:
+    from models.train_config import SIDE_CAMERA_OFFSET_M, TrainConfig
+
+    config = TrainConfig(data=["d"], out=str(tmp_path), edge_gain=0.2, edge_margin=2.0)
+    spec = config.pipeline().augment
+    assert (spec.edge_gain, spec.edge_margin_m, spec.side_camera_m) == (0.2, 2.0, SIDE_CAMERA_OFFSET_M)
+    assert config.data_options().road_middles and not TrainConfig(data=["d"], out="o").data_options().road_middles
+    for bad in ({"edge_gain": -0.1}, {"edge_gain": 2.0}, {"edge_margin": -1.0}):
+        with pytest.raises(ValueError, match="edge"):
+            TrainConfig(data=["d"], out=str(tmp_path), **bad)

@@ -65,6 +65,8 @@ def test_smoothed_scores_are_against_the_centred_average_of_the_log():
     assert (score.mse, score.pearson_r) == (plain.mse, plain.pearson_r) and plain.pearson_r_smoothed is None
     assert score.pearson_r_smoothed == pytest.approx(np.corrcoef(pred, intent)[0, 1])
     assert score.mse_smoothed == pytest.approx(np.mean((pred - intent) ** 2))
+    truth = np.array([s.steering for s in samples])
+    assert score.intent_r == pytest.approx(np.corrcoef(intent, truth)[0, 1]) and plain.intent_r is None
 
 
 def test_rbc_score_smooth_labels_adds_a_column_and_checks_its_value(tmp_path):

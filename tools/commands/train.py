@@ -44,6 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="not in the paper: add K steering per metre that the road's middle lies to the side "
                              "(each --data folder needs the road file of rbc data road): drivers hold lines of their "
                              "own on a wide road, and an image can only show where the road is. 0: off")
+    parser.add_argument("--edge-gain", type=float, default=TrainConfig.edge_gain, metavar="K",
+                        help="not in the paper: add K steering per metre that a camera (each at its own offset) "
+                             "stands beyond --edge-margin from the road's middle, towards it (each --data folder "
+                             "needs the road file of rbc data road): the drivers' own lines are left alone, the "
+                             "views near an edge learn to steer away from it. 0: off")
+    parser.add_argument("--edge-margin", type=float, default=TrainConfig.edge_margin, metavar="M",
+                        help="metres from the road's middle within which --edge-gain pulls nothing")
     parser.add_argument("--block-frames", type=int, default=TrainConfig.block_frames,
                         help="frames per held-out block with --split blocks (shortened for logs under 5 blocks)")
     parser.add_argument("--gap-frames", type=int, default=TrainConfig.gap_frames,
@@ -87,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
                          export=args.export, min_speed=min_speed, min_speed_unit=min_unit, speed_unit=args.speed_unit,
                          smooth_labels=args.smooth_labels, row_stride=args.row_stride, val_data=args.val_data,
                          balance_recordings=args.balance_recordings, label_lag=args.label_lag,
-                         centre_gain=args.centre_gain,
+                         centre_gain=args.centre_gain, edge_gain=args.edge_gain, edge_margin=args.edge_margin,
                          recovery_distance=args.recovery_distance, yaw_aug=args.yaw_aug, yaw_range=args.yaw_range,
                          yaw_gain=args.yaw_gain,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))

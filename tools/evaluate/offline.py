@@ -38,6 +38,8 @@ class OfflineScore:
     smooth_frames: int = 0
     mse_smoothed: float | None = None
     pearson_r_smoothed: float | None = None
+    # r of the recorded steering with that average: what predicting the average exactly would score
+    intent_r: float | None = None
 
     @property
     def beats_zero(self) -> bool:
@@ -65,8 +67,10 @@ def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
     m = steering_metrics(pred, truth)
     smoothed = {}
     if smooth_frames > 1:
-        ms = steering_metrics(pred, centred_average(truth, smooth_frames))
-        smoothed = {"smooth_frames": smooth_frames, "mse_smoothed": ms["mse"], "pearson_r_smoothed": ms["r"]}
+        intent = centred_average(truth, smooth_frames)
+        ms = steering_metrics(pred, intent)
+        smoothed = {"smooth_frames": smooth_frames, "mse_smoothed": ms["mse"], "pearson_r_smoothed": ms["r"],
+                    "intent_r": steering_metrics(intent, truth)["r"]}
     return OfflineScore(model=str(model_path), frames=m["n"], mse=m["mse"], pearson_r=m["r"], zero_mse=m["zero_mse"],
                         **smoothed)
 

@@ -39,6 +39,10 @@ class RecordingScore:
     eta: float | None = None
     interventions: int | None = None
     seconds_per_takeover: float | None = None
+    # against the recorded steering's INTENT_FRAMES average (what the driver meant), and that average's r
+    # with the recorded steering: about the most r any picture-to-steering model reaches here
+    r_to_intent: float | None = None
+    intent_r: float | None = None
 
     @property
     def beats_zero(self) -> bool:
@@ -56,6 +60,8 @@ class TrackSummary:
     beats_zero: int
     mean_eta: float | None
     mean_seconds_per_takeover: float | None
+    mean_r_to_intent: float | None = None
+    mean_intent_r: float | None = None
 
 
 def model_for(pattern: str, rec: PublicRecording) -> Path:
@@ -67,14 +73,20 @@ def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: 
                     max_offset_m: float = 1.0, lane: str = "road") -> RecordingScore:
     """Open loop on every row; closed loop too on the tracks of :data:`CLOSED_LOOP_TRACKS`."""
     from tools.evaluate.offline import score_models
+    from tools.realdata.stats import INTENT_FRAMES
 
     data = root / rec.name
-    (score,) = score_models([model], data)
+    (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES)
     eta = interventions = per_takeover = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
         eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m, lane)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
-                          round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover)
+                          round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover,
+                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r))
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None or np.isnan(value) else round(value, 4)
 
 
 def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str) -> tuple[float, int, float]:
@@ -127,8 +139,14 @@ def summarise(scores: Sequence[RecordingScore]) -> list[TrackSummary]:
         out.append(TrackSummary(
             track, len(mine), round(float(np.mean([s.pearson_r for s in mine])), 3), sum(s.beats_zero for s in mine),
             round(float(np.mean([s.eta for s in driven])), 2) if driven else None,
-            round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None))
+            round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None,
+            _mean_of([s.r_to_intent for s in mine]), _mean_of([s.intent_r for s in mine])))
     return out
+
+
+def _mean_of(values: Sequence[float | None]) -> float | None:
+    known = [v for v in values if v is not None]
+    return round(float(np.mean(known)), 3) if known else None
 
 
 def _cell(value: float | None, spec: str) -> str:
@@ -136,22 +154,28 @@ def _cell(value: float | None, spec: str) -> str:
 
 
 def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScore] = ()) -> str:
-    """Markdown: the per-track summary, then one row per recording (bold MSE: beats always-0)."""
-    lines = ["| track | recordings | mean r | beats always-0 | mean eta % | s per take-over |"
-             + (" peer: mean r | beats always-0 | mean eta % | s per take-over |" if peer else ""),
-             "|---|---|---|---|---|---|" + ("---|---|---|---|" if peer else "")]
+    """Markdown: the per-track summary, then one row per recording (bold MSE: beats always-0).
+
+    "r to mean" is r against the recorded steering's 9-frame average (what the driver meant); "ceiling" is
+    that average's own r with the recorded steering, about the most any model's r reaches there.
+    """
+    lines = ["| track | recordings | ceiling | mean r | r to mean | beats always-0 | mean eta % | s per take-over |"
+             + (" peer: mean r | r to mean | beats always-0 | mean eta % | s per take-over |" if peer else ""),
+             "|---|---|---|---|---|---|---|---|" + ("---|---|---|---|---|" if peer else "")]
     peer_by_track = {t.track: t for t in summarise(peer)}
     for t in summarise(scores):
-        row = (f"| {t.track} | {t.recordings} | {t.mean_r:.2f} | {t.beats_zero} of {t.recordings} | "
+        row = (f"| {t.track} | {t.recordings} | {_cell(t.mean_intent_r, '.2f')} | {t.mean_r:.2f} | "
+               f"{_cell(t.mean_r_to_intent, '.2f')} | {t.beats_zero} of {t.recordings} | "
                f"{_cell(t.mean_eta, '.1f')} | {_cell(t.mean_seconds_per_takeover, '.1f')} |")
         if peer:
             p = peer_by_track.get(t.track)
-            row += (f" {p.mean_r:.2f} | {p.beats_zero} of {p.recordings} | {_cell(p.mean_eta, '.1f')} | "
-                    f"{_cell(p.mean_seconds_per_takeover, '.1f')} |" if p else " – | – | – | – |")
+            row += (f" {p.mean_r:.2f} | {_cell(p.mean_r_to_intent, '.2f')} | {p.beats_zero} of {p.recordings} | "
+                    f"{_cell(p.mean_eta, '.1f')} | {_cell(p.mean_seconds_per_takeover, '.1f')} |"
+                    if p else " – | – | – | – | – |")
         lines.append(row)
-    lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | eta % (take-overs; s per take-over) |"
-              + (" peer MSE | peer r | peer eta % |" if peer else ""),
-              "|---|---|---|---|---|---|---|---|" + ("---|---|---|" if peer else "")]
+    lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | ceiling | r to mean | "
+              "eta % (take-overs; s per take-over) |" + (" peer MSE | peer r | peer eta % |" if peer else ""),
+              "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if peer else "")]
     peer_by_name = {p.name: p for p in peer}
 
     def mse(s: RecordingScore) -> str:
@@ -162,7 +186,7 @@ def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScor
 
     for s in sorted(scores, key=lambda s: (s.track, s.name.lower())):
         row = (f"| {s.name} | {s.track} | {s.fold} | {s.frames} | {s.zero_mse:.4f} | {mse(s)} | {s.pearson_r:.2f} | "
-               f"{loop(s)} |")
+               f"{_cell(s.intent_r, '.2f')} | {_cell(s.r_to_intent, '.2f')} | {loop(s)} |")
         if peer:
             p = peer_by_name.get(s.name)
             row += f" {mse(p)} | {p.pearson_r:.2f} | {loop(p)} |" if p else " – | – | – |"

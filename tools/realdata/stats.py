@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from models.labels import centred_average
+from models.metrics import pearson_r
 from protocol.datalog import find_log, read_log
 from tools.realdata.sharpness import sharpness_values
 from tools.realdata.stamps import frame_intervals, frame_time, session_ids
@@ -25,6 +27,9 @@ CREEP_SPEED = 5.0
 KEYBOARD_ZERO_SHARE = 0.30
 STEER_GRID = 0.05
 GRID_ZERO_SHARE = 0.10
+#: Frames of the centred average that stands for what the driver meant (``rbc train --smooth-labels``'s
+#: default recipe and ``rbc score --smooth-labels``).
+INTENT_FRAMES = 9
 
 
 def steering_input(steering: np.ndarray) -> str:
@@ -50,6 +55,7 @@ class Measures:
     sessions: int = 0
     duplicates: int = 0
     steering: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    intent: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the steering's INTENT_FRAMES average
     speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
     intervals: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sharpness: list[float] = field(default_factory=list)
@@ -74,6 +80,7 @@ class RecordingStats:
     steer_max: float | None
     abs_steer_p5: float | None
     abs_steer_p95: float | None
+    intent_r: float | None
     speed_min_mph: float | None
     speed_max_mph: float | None
     creep_share: float | None
@@ -82,6 +89,17 @@ class RecordingStats:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def intent_r(steering: np.ndarray, intent: np.ndarray) -> float | None:
+    """Pearson r of the recorded steering with its centred average (:data:`INTENT_FRAMES`).
+
+    A model that predicted exactly what the driver meant, the average, would score this r against the
+    recorded steering: the taps of a keyboard driver around it are noise no picture can predict, so this
+    is about the most a model's open-loop r can reach on the recording (None: constant steering).
+    """
+    r = pearson_r(intent, steering)
+    return None if np.isnan(r) else r
 
 
 def recording_name(path: Path) -> str:
@@ -102,6 +120,7 @@ def measure(path: Path, sharpness_frames: int = 20, session_gap_s: float = 1.0) 
         missing_images=centre_missing + side_missing, skipped_rows=len(report.skipped),
         undated=sum(t is None for t in times), sessions=max(session_ids(times, session_gap_s)),
         duplicates=sum(n - 1 for n in names.values()), steering=steering,
+        intent=centred_average(steering, INTENT_FRAMES),
         speed=np.array([s.speed for s in samples], np.float64), intervals=frame_intervals(times, session_gap_s),
         sharpness=sharpness_values([s.center for s in samples], sharpness_frames), inputs=[steering_input(steering)])
 
@@ -113,7 +132,8 @@ def combine(measures: Sequence[Measures], name: str = "total") -> Measures:
 
     counts = ("rows", "with_sides", "missing_images", "skipped_rows", "undated", "sessions", "duplicates")
     return Measures(name, **{k: sum(getattr(m, k) for m in measures) for k in counts},
-                    steering=pooled("steering"), speed=pooled("speed"), intervals=pooled("intervals"),
+                    steering=pooled("steering"), intent=pooled("intent"), speed=pooled("speed"),
+                    intervals=pooled("intervals"),
                     sharpness=[v for m in measures for v in m.sharpness],
                     inputs=[i for m in measures for i in m.inputs])
 
@@ -136,6 +156,7 @@ def summarise(m: Measures) -> RecordingStats:
         steer_min=stat(steer, np.min), steer_max=stat(steer, np.max),
         abs_steer_p5=stat(nonzero, lambda v: np.percentile(v, 5)),
         abs_steer_p95=stat(nonzero, lambda v: np.percentile(v, 95)),
+        intent_r=intent_r(steer, m.intent),
         speed_min_mph=stat(speed, np.min), speed_max_mph=stat(speed, np.max),
         creep_share=stat(speed, lambda v: np.mean(v < CREEP_SPEED)), duplicates=m.duplicates,
         sharpness=float(np.mean(m.sharpness)) if m.sharpness else None)

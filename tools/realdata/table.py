@@ -17,6 +17,7 @@ _COLUMNS = (
     ("input", 8, lambda s: s.input),
     ("steer min/max", 13, lambda s: _pair(s.steer_min, s.steer_max, "+.2f")),
     ("|s| p5/p95", 10, lambda s: _pair(s.abs_steer_p5, s.abs_steer_p95, ".2f")),
+    ("r9", 4, lambda s: _num(s.intent_r, ".2f")),
     ("mph", 9, lambda s: _pair(s.speed_min_mph, s.speed_max_mph, ".0f", "-")),
     ("<5mph", 5, lambda s: _num(s.creep_share, ".0%")),
     ("dups", 5, lambda s: f"{s.duplicates}"),
