@@ -228,3 +228,18 @@ def test_the_edge_gain_reaches_the_augmentation_and_a_bad_one_is_refused(tmp_pat
     for bad in ({"edge_gain": -0.1}, {"edge_gain": 2.0}, {"edge_margin": -1.0}):
         with pytest.raises(ValueError, match="edge"):
             TrainConfig(data=["d"], out=str(tmp_path), **bad)
+
+
+def test_rbc_data_road_public_measures_the_lake_recordings_and_says_what_is_missing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tools.cli import main
+    from tools.realdata.recordings import public_recordings, select
+
+    lake = [r.name for r in select(public_recordings(), "lake")]
+    shutil.copytree(SAMPLE, tmp_path / lake[0])
+    assert main(["data", "road", "--public", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{len(lake) - 1} public lake recordings not under {tmp_path}" in err and "rbc data fetch" in err
+    assert not (tmp_path / lake[0] / "road_edges.csv").exists()  # nothing measured before the check
+    assert main(["data", "road"]) == 2
+    assert "--public ROOT" in capsys.readouterr().err

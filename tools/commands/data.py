@@ -62,8 +62,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     road = sub.add_parser("road", formatter_class=formatter, help="find the road's edge lines in every centre frame",
                           description="write DIR/road_edges.csv: where the road's edge lines were in each centre frame "
-                                      "(what rbc drive-log's road rule uses, and rbc train --centre-gain reads)")
-    road.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="recording folders (driving_log.csv + IMG/)")
+                                      "(what rbc drive-log's road rule uses, and rbc train --edge-gain and "
+                                      "--centre-gain read)")
+    road.add_argument("dirs", type=Path, nargs="*", metavar="DIR", help="recording folders (driving_log.csv + IMG/)")
+    road.add_argument("--public", type=Path, metavar="ROOT",
+                      help="also every lake recording of the public list under ROOT (where rbc data fetch put them): "
+                           "the lake road has an edge line on each side; jungle and mountain roads are not measured")
     road.add_argument("--speed-unit", choices=("mph", "kmh"), default="mph",
                       help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
 
@@ -157,8 +161,20 @@ def _road(args: argparse.Namespace) -> int:
     from tools.drivelog.path import recorded_drive
     from tools.drivelog.road import estimate_road
     from tools.drivelog.yaw import wheelbase_or_default
+    from tools.errors import CommandError
+    from tools.realdata.recordings import public_recordings, select
 
-    for folder in args.dirs:
+    dirs = list(args.dirs)
+    if args.public:
+        public = [args.public / r.name for r in select(public_recordings(), "lake")]
+        absent = [d.name for d in public if not (d / "driving_log.csv").is_file()]
+        if absent:
+            raise CommandError(f"{len(absent)} public lake recordings not under {args.public}, first {absent[0]}",
+                               f"rbc data fetch --out {args.public}")
+        dirs += public
+    if not dirs:
+        raise CommandError("no recording to measure", "name recording folders, or --public ROOT for the public ones")
+    for folder in dirs:
         log = recorded_drive(read_log(folder)[0], args.speed_unit)
         wheelbase, _ = wheelbase_or_default(log)
         progress = Progress(f"road {folder.name}", unit="frame")

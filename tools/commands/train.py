@@ -46,9 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "own on a wide road, and an image can only show where the road is. 0: off")
     parser.add_argument("--edge-gain", type=float, default=TrainConfig.edge_gain, metavar="K",
                         help="not in the paper: add K steering per metre that a camera (each at its own offset) "
-                             "stands beyond --edge-margin from the road's middle, towards it (each --data folder "
-                             "needs the road file of rbc data road): the drivers' own lines are left alone, the "
-                             "views near an edge learn to steer away from it. 0: off")
+                             "stands beyond --edge-margin from the road's middle, towards it (from the road files of "
+                             "rbc data road; a recording without one is not pulled): the drivers' own lines are left "
+                             "alone, the views near an edge learn to steer away from it. 0: off")
     parser.add_argument("--edge-margin", type=float, default=TrainConfig.edge_margin, metavar="M",
                         help="metres from the road's middle within which --edge-gain pulls nothing")
     parser.add_argument("--block-frames", type=int, default=TrainConfig.block_frames,
