@@ -116,7 +116,7 @@ def _crossval(args: argparse.Namespace) -> int:
     from tools.console import Progress
     from tools.errors import CommandError
     from tools.realdata.crossval import FOLD_FIELD, format_tables, model_for, score_all, summarise
-    from tools.realdata.recordings import public_recordings, select
+    from tools.realdata.recordings import public_recordings, require_fetched, select
 
     recs = select(public_recordings(), args.track, args.name)
     if not recs:
@@ -125,13 +125,10 @@ def _crossval(args: argparse.Namespace) -> int:
         raise CommandError("--workers must be 1..64 and --max-offset 0.05..10 metres")
     missing = [str(p) for p in {model_for(args.models, r) for r in recs} | ({Path(args.peer)} if args.peer else set())
                if not p.is_file()]
-    absent = [r.name for r in recs if not (args.root / r.name / "driving_log.csv").is_file()]
     if missing:
         raise CommandError(f"no model at {', '.join(sorted(missing))}",
                            f"train one per fold ({FOLD_FIELD} in --models): rbc train $(rbc data fold F --root ...)")
-    if absent:
-        raise CommandError(f"{len(absent)} recordings not under {args.root}, first {absent[0]}",
-                           f"rbc data fetch --out {args.root}")
+    require_fetched(recs, args.root)
     closed = not args.no_closed_loop
     runs = [("folds", args.models)] + ([("peer", args.peer)] if args.peer else [])
     results = {}
@@ -162,16 +159,11 @@ def _road(args: argparse.Namespace) -> int:
     from tools.drivelog.road import estimate_road
     from tools.drivelog.yaw import wheelbase_or_default
     from tools.errors import CommandError
-    from tools.realdata.recordings import public_recordings, select
+    from tools.realdata.recordings import public_recordings, require_fetched, select
 
     dirs = list(args.dirs)
     if args.public:
-        public = [args.public / r.name for r in select(public_recordings(), "lake")]
-        absent = [d.name for d in public if not (d / "driving_log.csv").is_file()]
-        if absent:
-            raise CommandError(f"{len(absent)} public lake recordings not under {args.public}, first {absent[0]}",
-                               f"rbc data fetch --out {args.public}")
-        dirs += public
+        dirs += require_fetched(select(public_recordings(), "lake"), args.public, "public lake recordings")
     if not dirs:
         raise CommandError("no recording to measure", "name recording folders, or --public ROOT for the public ones")
     for folder in dirs:

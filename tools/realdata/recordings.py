@@ -11,6 +11,7 @@ import csv
 from collections.abc import Iterable
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 
 from tools.realdata.rows import RowRange, parse_rows
 
@@ -76,3 +77,14 @@ def select(recordings: Iterable[PublicRecording], track: str | None = None,
     if unknown:
         raise ValueError(f"unknown recording(s) {', '.join(unknown)}; known: {', '.join(r.name for r in recordings)}")
     return [r for r in recordings if (track is None or r.track == track) and (not wanted or r.name in wanted)]
+
+
+def require_fetched(recordings: Iterable[PublicRecording], root: Path, what: str = "recordings") -> list[Path]:
+    """Each recording's folder under ``root``; one missing (no ``driving_log.csv``) stops before any work."""
+    from tools.errors import CommandError
+
+    folders = [root / r.name for r in recordings]
+    absent = [f.name for f in folders if not (f / "driving_log.csv").is_file()]
+    if absent:
+        raise CommandError(f"{len(absent)} {what} not under {root}, first {absent[0]}", f"rbc data fetch --out {root}")
+    return folders
