@@ -48,6 +48,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "default %(default)s)")
     p.add_argument("--tau", type=float, default=drive.tau,
                    help="gain of the throttle/brake law, 0..1 (tau of Eq. 14; default %(default)s)")
+    p.add_argument("--smooth", type=float, default=drive.smooth, metavar="ALPHA",
+                   help="smooth each client's steering over time: every frame sends ALPHA of the model's new output "
+                        "and 1 - ALPHA of that client's last command, 0 < ALPHA <= 1, 1: off (default: what the "
+                        "model's metadata asks for, 0.5 for the bundled unity.onnx; off for a model without)")
     p.add_argument("--speed-unit", "--telemetry-speed-unit", dest="telemetry_speed_unit",
                    choices=[u.value for u in SpeedUnit], default=drive.speed_unit.value,
                    help="unit of the telemetry speed: mph like the stock Udacity simulator, or kmh like the paper's")
@@ -123,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         drive = DriveConfig(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit, tau=args.tau,
-                            speed_unit=SpeedUnit(args.telemetry_speed_unit))
+                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smooth=args.smooth)
         drive.control_law()
         inference = InferenceConfig(threads=args.threads, provider=args.provider)
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
@@ -171,8 +175,10 @@ def main(argv: list[str] | None = None) -> int:
                           max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict,
                           dashboard=_dashboard_wanted(args, sock))
     log.info("model %s", model.describe())
-    log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s",
-             drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value)
+    smooth, whose = (model.smooth, "the model's") if drive.smooth is None else (drive.smooth, "--smooth")
+    log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s%s",
+             drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value,
+             f", steering smoothed per client (alpha {smooth:g}, {whose})" if smooth < 1 else "")
     if not listen.is_local(sock.getsockname()[0]):
         log.warning(listen.EXPOSED_WARNING, listen.url(sock).removeprefix("http://"))
     if args.workers > 1:

@@ -18,7 +18,7 @@ def server_view(server: Any) -> dict[str, Any]:
     return {
         "model": pipeline.model.path.name, "contract": pipeline.contract.__dict__,
         "control": {"speed_limit_kmh": cfg.speed_limit_kmh, "steer_limit_deg": cfg.steer_limit_deg, "tau": cfg.tau,
-                    "speed_unit": cfg.speed_unit.value},
+                    "speed_unit": cfg.speed_unit.value, "smooth": pipeline.smooth},
         "clients": len(server.clients), "viewers": server.dashboard.viewers if server.dashboard else 0,
     }
 

@@ -15,6 +15,7 @@ import numpy as np
 import onnxruntime as ort
 
 from drive_server.contract import METADATA_KEY, ContractError, PreprocessContract, infer_contract
+from drive_server.smoothing import SERVING_KEY, serving_alpha
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +85,10 @@ class SteeringModel:
         self.input_name, self.output_name = inp.name, outputs[0].name
         self.input_shape = tuple(inp.shape)
         self.contract, self.contract_source = self._contract()
+        try:  # the steering smoothing the model was measured with (drive_server.smoothing; 1: none)
+            self.smooth = serving_alpha(self._session.get_modelmeta().custom_metadata_map.get(SERVING_KEY))
+        except ValueError as exc:
+            raise ModelError(f"{path.name}: {exc}") from None
         self._outputs = [self.output_name]
 
     def _contract(self) -> tuple[PreprocessContract, str]:
@@ -140,4 +145,5 @@ class SteeringModel:
                 f"{self.contract.width}x{self.contract.height} {self.contract.color} {self.contract.layout} "
                 f"crop {self.contract.crop_top}..{self.contract.crop_bottom}"
                 + (f" decode 1/{self.contract.decode_reduce}" if self.contract.decode_reduce else "")
-                + (f" edges {self.contract.blank_columns} blanked" if self.contract.blank_columns else ""))
+                + (f" edges {self.contract.blank_columns} blanked" if self.contract.blank_columns else "")
+                + (f", serving: steering smoothed (alpha {self.smooth:g})" if self.smooth < 1 else ""))

@@ -15,6 +15,7 @@ import numpy as np
 from drive_server.control import ControlLaw
 from drive_server.model import SteeringModel
 from drive_server.preprocess import jpeg_reduction, preprocess
+from drive_server.smoothing import OFF, SteeringSmoother, check_alpha
 from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
 
 
@@ -24,12 +25,19 @@ class InferenceError(RuntimeError):
 
 @dataclass(frozen=True)
 class DriveConfig:
-    """Control-law parameters and the unit of the telemetry speed (mph: the stock simulator)."""
+    """Control-law parameters, the unit of the telemetry speed (mph: the stock simulator) and the weight of each
+    new output in the per-client smoothing of the steering (``drive_server.smoothing``; 1: off; None: what the
+    model's metadata asks for, off for a model without)."""
 
     speed_limit_kmh: float = ControlLaw.speed_limit_kmh
     steer_limit_deg: float = ControlLaw.steer_limit_deg
     tau: float = ControlLaw.tau
     speed_unit: SpeedUnit = SpeedUnit.MPH
+    smooth: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.smooth is not None:
+            check_alpha(self.smooth)
 
     def control_law(self) -> ControlLaw:
         return ControlLaw(speed_limit_kmh=self.speed_limit_kmh, steer_limit_deg=self.steer_limit_deg, tau=self.tau)
@@ -44,6 +52,11 @@ class DrivePipeline:
         self.law = config.control_law()
         self.contract = model.contract
         self.reduce = jpeg_reduction(model.contract)
+        self.smooth = model.smooth if config.smooth is None else config.smooth
+
+    def smoother(self) -> SteeringSmoother | None:
+        """A new client's smoothing state (None when off: nothing to keep)."""
+        return SteeringSmoother(self.smooth) if self.smooth < OFF else None
 
     def steer(self, rgb: np.ndarray) -> float:
         """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``)."""
@@ -61,8 +74,12 @@ class DrivePipeline:
         throttle = self.law.command(steering * self.config.steer_limit_deg, to_kmh(speed, self.config.speed_unit))
         return SteerCommand(steering=steering, throttle=throttle)
 
-    def run(self, telemetry: Telemetry) -> tuple[SteerCommand, tuple[float, float, float, float]]:
+    def run(self, telemetry: Telemetry, smoother: SteeringSmoother | None = None
+            ) -> tuple[SteerCommand, tuple[float, float, float, float]]:
         """Command for one parsed frame and the durations (s) of decode, preprocess, inference, control.
+
+        ``smoother``: the client's own smoothing state (:meth:`smoother`), applied before the control
+        law, so throttle and brake answer the steering that is sent.
 
         Raises ``ProtocolError`` for an unusable image and ``InferenceError`` for an unusable output.
         """
@@ -73,7 +90,8 @@ class DrivePipeline:
         t2 = perf_counter()
         value = self.model.predict(x)
         t3 = perf_counter()
-        command = self.control(self._usable(value), telemetry.speed)
+        steering = self._usable(value)
+        command = self.control(smoother(steering) if smoother is not None else steering, telemetry.speed)
         t4 = perf_counter()
         return command, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)
 

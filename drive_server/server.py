@@ -114,7 +114,8 @@ class DriveServer:
         eio_sid = self.sio.manager.eio_sid_from_sid(sid, "/")
         ws = self.sio.environ.get(eio_sid, {}).get("rbc.websocket") if eio_sid else None
         return ClientState(sid, eio_sid, self.transport.direct_reply and eio_sid is not None, agent,
-                           LatencyStats(sid), FrameGuard(self.config.fallback), socket=getattr(ws, "socket", None))
+                           LatencyStats(sid), FrameGuard(self.config.fallback), socket=getattr(ws, "socket", None),
+                           smoother=self.pipeline.smoother())
 
     def _client(self, sid: str) -> ClientState:
         client = self.clients.get(sid)
@@ -155,7 +156,7 @@ class DriveServer:
                 self._reply(client, "manual", {})
                 return
             t_parse = perf_counter() - t0
-            command, (decode, pre, infer, control) = self.pipeline.run(telemetry)
+            command, (decode, pre, infer, control) = self.pipeline.run(telemetry, client.smoother)
             t4 = perf_counter()
             sent = client.guard.good(command)
             self._reply(client, "steer", encode_steer(sent))

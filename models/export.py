@@ -22,6 +22,7 @@ from torch import nn
 from drive_server import runrecords
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.preprocess import to_input_tensor
+from drive_server.smoothing import OFF, SERVING_KEY, serving_json
 from models.nets import ContractInput
 
 log = logging.getLogger(__name__)
@@ -37,8 +38,11 @@ class ExportError(RuntimeError):
 
 
 def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, Any], path: Path,
-                frames: np.ndarray) -> float:
-    """Write ``path`` (atomically) and return the max |ORT - torch| on ``frames`` (uint8 network images)."""
+                frames: np.ndarray, serve_smooth: float = OFF) -> float:
+    """Write ``path`` (atomically) and return the max |ORT - torch| on ``frames`` (uint8 network images).
+
+    ``serve_smooth`` < 1: the model asks drive_server to smooth each client's steering so (``rbc.serving``).
+    """
     model = ContractInput(net, contract.layout).eval()
     dummy = torch.zeros(contract.input_shape, dtype=torch.float32)
     path = Path(path)
@@ -52,6 +56,8 @@ def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, An
         meta = {p.key: p.value for p in proto.metadata_props}
         meta[METADATA_KEY] = contract.to_json()
         meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
+        if serve_smooth < OFF:
+            meta[SERVING_KEY] = serving_json(serve_smooth)
         del proto.metadata_props[:]
         for k, v in meta.items():
             proto.metadata_props.add(key=k, value=v)

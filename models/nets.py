@@ -77,6 +77,25 @@ class ContractInput(nn.Module):
         return self.net(x)
 
 
+class MirrorAveraged(nn.Module):
+    """``(f(x) - f(mirror x)) / 2`` for an NCHW network ``f``: the exported model answers a mirrored road with
+    exactly the opposite steering and a symmetric one with exactly 0.
+
+    Training flips half its samples (the paper's augmentation), so the network is symmetric only on
+    average; what is left of its asymmetry is noise that both halves carry with opposite signs, and the
+    average cancels it. Both halves run as one batch of 2N, so ONNX Runtime makes one pass per layer.
+    """
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        both = self.net(torch.cat([x, x.flip(-1)]))
+        straight, mirrored = both.chunk(2)
+        return 0.5 * (straight - mirrored)
+
+
 def _flat_size(features: nn.Module, height: int, width: int) -> int:
     with torch.no_grad():
         return int(features(torch.zeros(1, 3, height, width)).numel())

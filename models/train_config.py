@@ -92,6 +92,11 @@ class TrainConfig:
     yaw_aug: float = 0.0
     yaw_range: float = 6.0
     yaw_gain: float = 1.0
+    # not in the paper: export (f(x) - f(mirror x)) / 2 (models.nets.MirrorAveraged); training is unchanged
+    mirror_average: bool = False
+    # how drive_server smooths each client's steering unless told otherwise (drive_server.smoothing; 1: off),
+    # written into the model's metadata
+    serve_smooth: float = 1.0
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -112,6 +117,8 @@ class TrainConfig:
             raise ValueError(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
         if not 0.0 <= self.yaw_gain <= 5.0:
             raise ValueError(f"yaw gain must be 0..5, got {self.yaw_gain}")
+        if not 0.0 < self.serve_smooth <= 1.0:
+            raise ValueError(f"serve smoothing must be above 0 and at most 1 (1: off), got {self.serve_smooth}")
         if not 0.0 <= self.centre_gain <= 1.0:
             raise ValueError(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
         if not 0.0 <= self.edge_gain <= 1.0:

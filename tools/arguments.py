@@ -27,6 +27,25 @@ def add_speed_unit_argument(parser: argparse.ArgumentParser, default: str, what:
                         help=f"unit of {what}: mph like the stock Udacity simulator, or kmh like the paper's")
 
 
+def add_smooth_argument(parser: argparse.ArgumentParser) -> None:
+    """``--smooth ALPHA``: the model's steering smoothed over the frames as ``drive_server --smooth`` does."""
+    parser.add_argument("--smooth", type=float, default=None, metavar="ALPHA",
+                        help="smooth the model's steering over the frames as drive_server --smooth does: each frame "
+                             "ALPHA of the new output and 1 - ALPHA of the last, 0 < ALPHA <= 1, 1: off (default: "
+                             "what the model's metadata asks for, as drive_server; off for a model without)")
+
+
+def smooth_alpha(args: argparse.Namespace) -> float | None:
+    """The ``--smooth`` value (None: the model's own), or a CommandError in one line."""
+    from drive_server.smoothing import check_alpha
+    from tools.errors import CommandError
+
+    try:
+        return None if args.smooth is None else check_alpha(args.smooth)
+    except ValueError as exc:
+        raise CommandError(f"--smooth: {exc}") from None
+
+
 #: A documented region of interest for real Unity recordings with the car's bonnet in view: rows 64..136 of
 #: the 320x160 frame drop the sky and far scenery above and the bonnet (from row ~137 down) below.
 BONNET_CROP = (64, 136)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tools.arguments import add_speed_unit_argument
+from tools.arguments import add_smooth_argument, add_speed_unit_argument, smooth_alpha
 from tools.realdata.fetch import DEFAULT_BASE_URL
 from tools.realdata.recordings import TRACKS
 
@@ -97,6 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cv.add_argument("--max-offset", type=float, default=1.0, metavar="M",
                     help="with --lane path: metres off the recorded path at which a person takes over, as rbc "
                          "drive-log (default %(default)s)")
+    add_smooth_argument(cv)
     cv.add_argument("--workers", type=int, default=2, help="recordings scored at once (default %(default)s)")
     cv.add_argument("--json", type=Path, default=None, metavar="OUT", help="also write every score as JSON")
 
@@ -118,6 +119,7 @@ def _crossval(args: argparse.Namespace) -> int:
     from tools.realdata.crossval import FOLD_FIELD, format_tables, model_for, score_all, summarise
     from tools.realdata.recordings import public_recordings, require_fetched, select
 
+    alpha = smooth_alpha(args)
     recs = select(public_recordings(), args.track, args.name)
     if not recs:
         raise CommandError("no public recording among those named")
@@ -136,14 +138,14 @@ def _crossval(args: argparse.Namespace) -> int:
         progress = Progress(f"crossval {what}", unit="recording")
         try:
             results[what] = score_all(recs, args.root, pattern, closed, args.max_offset, args.workers,
-                                      on_done=progress, lane=args.lane)
+                                      on_done=progress, lane=args.lane, smooth=alpha if what == "folds" else None)
         finally:
             progress.close()
     print(format_tables(results["folds"], results.get("peer", ())))
     if args.json:
         write_json(args.json, {"code_version": code_version(), "root": str(args.root), "models": args.models,
                                "peer": args.peer, "closed_loop": closed, "lane": args.lane,
-                               "max_offset_m": args.max_offset,
+                               "max_offset_m": args.max_offset, "smooth": alpha,
                                **{what: {"recordings": [s.as_dict() for s in scores],
                                          "tracks": [t.__dict__ for t in summarise(scores)]}
                                   for what, scores in results.items()}})

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from tools.arguments import add_smooth_argument, smooth_alpha
 from tools.errors import CommandError
 
 
@@ -20,6 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                           "zero: always straight (fails on curves)")
     p.add_argument("--steer-bias", type=float, default=0.0, metavar="B",
                    help="added to every steering value (a biased driver must fail: a check of the measure)")
+    add_smooth_argument(p)
     p.add_argument("--lane", choices=("road", "path"), default=LoopRules.lane,
                    help="road: a person takes over when the car's side passes an edge line of the road, found in "
                         "each recorded frame; path: when the car is --max-offset from the driver's own line (DAVE-2)")
@@ -49,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from protocol.datalog import read_log
 
+    alpha = smooth_alpha(args)
+    if alpha is not None and alpha < 1 and args.model is None:
+        raise CommandError("--smooth smooths a model's steering", "give --model M.onnx, or leave --smooth out")
     samples, report = read_log(args.data)
     if args.calibrate:
         return _calibrate(samples, args.calibrate_rows)
@@ -71,7 +76,7 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     from tools.drivelog.record import result_record
 
     log = recorded_drive(samples, args.speed_unit)
-    driver, name = make_driver(log, args.model, args.baseline, args.steer_bias)
+    driver, name = make_driver(log, args.model, args.baseline, args.steer_bias, smooth_alpha(args))
     wheelbase, fit = _wheelbase(args, log)
     rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset, views=args.views, wheelbase_m=wheelbase,
                       speed_limit_kmh=args.speed_limit)

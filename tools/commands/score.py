@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from protocol.facts import CAMERAS
+from tools.arguments import add_smooth_argument, smooth_alpha
 from tools.console import Progress
 from tools.errors import CommandError
 
@@ -22,6 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--smooth-labels", type=int, default=0, metavar="N",
                    help="also score against the recorded steering averaged over N frames (centred): keyboard "
                         "taps averaged to what the driver meant, e.g. 9 at 10 Hz; 0: off (default %(default)s)")
+    add_smooth_argument(p)
     p.add_argument("--json", type=Path, default=None, help="also write the scores to this JSON file")
 
 
@@ -33,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.smooth_labels <= 1000:
         raise CommandError("--smooth-labels must be 0..1000 frames")
+    alpha = smooth_alpha(args)
     models = args.model or bundled_models()
     total = len(camera_frames(read_log(args.data)[0], args.camera)) * len(models)
     progress, done = Progress("score", unit="frame"), [0]
@@ -42,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
         progress(done[0], total)
 
     try:
-        scores = score_models(models, args.data, args.camera, on_frame=tick, smooth_frames=args.smooth_labels)
+        scores = score_models(models, args.data, args.camera, on_frame=tick, smooth_frames=args.smooth_labels,
+                              smooth=alpha)
     finally:
         progress.close()
     smooth = args.smooth_labels > 1
@@ -56,6 +60,6 @@ def run(args: argparse.Namespace) -> int:
               f"{'yes' if s.beats_zero else 'no':<14}{extra}")
     if args.json:
         write_json(args.json, {"data": str(args.data), "camera": args.camera, "smooth_labels": args.smooth_labels,
-                               "code_version": code_version(),
+                               "smooth": alpha, "code_version": code_version(),
                                "scores": [s.as_dict() for s in scores]})
     return 0

@@ -58,6 +58,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--export", choices=("best", "last"), default=TrainConfig.export,
                         help="which epoch becomes model.onnx: the one with the lowest validation MSE, or the last "
                              "(the bundled models: last)")
+    parser.add_argument("--mirror-average", action="store_true",
+                        help="not in the paper: the exported model averages its steering for the frame and minus its "
+                             "steering for the mirrored frame (one batch of two): a mirrored road gets exactly the "
+                             "opposite answer, and the network's left-right noise cancels. Training is unchanged; "
+                             "inference costs two passes")
+    parser.add_argument("--serve-smooth", type=float, default=TrainConfig.serve_smooth, metavar="ALPHA",
+                        help="written into the model: drive_server (and rbc score, drive-log, data crossval) smooth "
+                             "each client's steering over time with this weight of the new output unless --smooth says "
+                             "otherwise, 0 < ALPHA <= 1 (default %(default)s: off)")
     add_preprocess_arguments(parser)
     parser.add_argument("--min-speed", type=str, default=str(TrainConfig.min_speed), metavar="SPEED",
                         help="drop rows recorded slower than this, e.g. 5mph or 8kmh (a bare number is in "
@@ -96,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
                          balance_recordings=args.balance_recordings, label_lag=args.label_lag,
                          centre_gain=args.centre_gain, edge_gain=args.edge_gain, edge_margin=args.edge_margin,
                          recovery_distance=args.recovery_distance, yaw_aug=args.yaw_aug, yaw_range=args.yaw_range,
-                         yaw_gain=args.yaw_gain,
+                         yaw_gain=args.yaw_gain, mirror_average=args.mirror_average,
+                         serve_smooth=args.serve_smooth,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
     if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)

@@ -14,18 +14,25 @@ from tools.drivelog.loop import Driver
 from tools.drivelog.path import RecordedDrive
 
 
-def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bias: float = 0.0) -> tuple[Driver, str]:
-    """(driver, its name for the record). Exactly one of ``model`` and ``baseline`` is given."""
+def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bias: float = 0.0,
+                smooth: float | None = None) -> tuple[Driver, str]:
+    """(driver, its name for the record). Exactly one of ``model`` and ``baseline`` is given.
+
+    The model's steering is smoothed over the drive as drive_server does for a client: by ``smooth``, or (None)
+    as the model's metadata asks.
+    """
     if model is not None:
         from drive_server.model import SteeringModel
-        from drive_server.pipeline import DrivePipeline
+        from drive_server.pipeline import DriveConfig, DrivePipeline
 
-        pipeline = DrivePipeline(SteeringModel(Path(model)))
+        pipeline = DrivePipeline(SteeringModel(Path(model)), DriveConfig(smooth=smooth))
+        smoother = pipeline.smoother()
 
         def base(view: np.ndarray, i: int) -> float:
-            return pipeline.steer(view)
+            value = pipeline.steer(view)
+            return smoother(value) if smoother is not None else value
 
-        name = Path(model).name
+        name = Path(model).name + (f" smoothed {pipeline.smooth:g}" if smoother is not None else "")
     elif baseline == "recorded":
         def base(view: np.ndarray, i: int) -> float:
             return float(log.steering[i])

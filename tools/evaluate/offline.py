@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from drive_server.model import SteeringModel
-from drive_server.pipeline import DrivePipeline
+from drive_server.pipeline import DriveConfig, DrivePipeline
+from drive_server.smoothing import OFF
 from models.labels import centred_average
 from models.metrics import steering_metrics
 from protocol.datalog import Sample, read_log
@@ -40,6 +41,7 @@ class OfflineScore:
     pearson_r_smoothed: float | None = None
     # r of the recorded steering with that average: what predicting the average exactly would score
     intent_r: float | None = None
+    smooth: float = OFF  # the model's steering was smoothed over the log's frames as drive_server does (1: not)
 
     @property
     def beats_zero(self) -> bool:
@@ -56,11 +58,15 @@ def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, fl
 
 
 def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
-                on_frame: Callable[[], None] | None = None, smooth_frames: int = 0) -> OfflineScore:
-    pipeline = DrivePipeline(SteeringModel(model_path))
+                on_frame: Callable[[], None] | None = None, smooth_frames: int = 0,
+                smooth: float | None = None) -> OfflineScore:
+    pipeline = DrivePipeline(SteeringModel(model_path), DriveConfig(smooth=smooth))
+    smoother = pipeline.smoother()
     pred = np.empty(len(frames))
     for i, (path, _) in enumerate(frames):
         pred[i] = pipeline.steer(read_jpeg_file(path, reduce=pipeline.reduce))
+        if smoother is not None:
+            pred[i] = smoother(pred[i])
         if on_frame:
             on_frame()
     truth = np.array([steering for _, steering in frames])
@@ -72,15 +78,17 @@ def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
         smoothed = {"smooth_frames": smooth_frames, "mse_smoothed": ms["mse"], "pearson_r_smoothed": ms["r"],
                     "intent_r": steering_metrics(intent, truth)["r"]}
     return OfflineScore(model=str(model_path), frames=m["n"], mse=m["mse"], pearson_r=m["r"], zero_mse=m["zero_mse"],
-                        **smoothed)
+                        smooth=pipeline.smooth, **smoothed)
 
 
 def score_models(models: Sequence[Path], data: Path, camera: str = "center",
-                 on_frame: Callable[[], None] | None = None, smooth_frames: int = 0) -> list[OfflineScore]:
+                 on_frame: Callable[[], None] | None = None, smooth_frames: int = 0,
+                 smooth: float | None = None) -> list[OfflineScore]:
     """Each model's :class:`OfflineScore` on the log in ``data`` (rows without the camera's frame skipped).
 
     ``smooth_frames`` > 1 also scores against the recorded steering's centred average over that many
-    frames (:func:`centred_average`), in log order.
+    frames (:func:`centred_average`), in log order. Each model's steering is smoothed over the frames in log
+    order as drive_server does for one client: by ``smooth``, or (None) as the model's metadata asks.
     """
     samples, report = read_log(data)
     if report.skipped:
@@ -88,4 +96,4 @@ def score_models(models: Sequence[Path], data: Path, camera: str = "center",
     frames = camera_frames(samples, camera)
     if not frames:
         raise ValueError(f"{data}: no row has a {camera} frame")
-    return [score_model(Path(m), frames, on_frame, smooth_frames) for m in models]
+    return [score_model(Path(m), frames, on_frame, smooth_frames, smooth) for m in models]

@@ -43,6 +43,7 @@ class RecordingScore:
     # with the recorded steering: about the most r any picture-to-steering model reaches here
     r_to_intent: float | None = None
     intent_r: float | None = None
+    smooth: float = 1.0  # the model's steering smoothed as drive_server does (drive_server.smoothing; 1: not)
 
     @property
     def beats_zero(self) -> bool:
@@ -70,26 +71,28 @@ def model_for(pattern: str, rec: PublicRecording) -> Path:
 
 
 def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: bool = True,
-                    max_offset_m: float = 1.0, lane: str = "road") -> RecordingScore:
-    """Open loop on every row; closed loop too on the tracks of :data:`CLOSED_LOOP_TRACKS`."""
+                    max_offset_m: float = 1.0, lane: str = "road", smooth: float | None = None) -> RecordingScore:
+    """Open loop on every row; closed loop too on the tracks of :data:`CLOSED_LOOP_TRACKS`; in both the model's
+    steering smoothed as drive_server would (``smooth``; None: as the model's metadata asks)."""
     from tools.evaluate.offline import score_models
     from tools.realdata.stats import INTENT_FRAMES
 
     data = root / rec.name
-    (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES)
+    (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES, smooth=smooth)
     eta = interventions = per_takeover = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
-        eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m, lane)
+        eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m, lane, smooth)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
                           round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover,
-                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r))
+                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth)
 
 
 def _rounded(value: float | None) -> float | None:
     return None if value is None or np.isnan(value) else round(value, 4)
 
 
-def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str) -> tuple[float, int, float]:
+def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str,
+                 smooth: float | None) -> tuple[float, int, float]:
     from protocol.datalog import read_log
     from tools.drivelog.drivers import make_driver
     from tools.drivelog.loop import LoopRules, drive
@@ -99,7 +102,7 @@ def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str) -> tup
 
     log = recorded_drive(read_log(data)[0])
     wheelbase, _ = wheelbase_or_default(log)  # as rbc drive-log does
-    driver, _ = make_driver(log, model, None)
+    driver, _ = make_driver(log, model, None, smooth=smooth)
     rules = LoopRules(lane=lane, max_offset_m=max_offset_m, wheelbase_m=wheelbase)
     road = estimate_road(log, wheelbase) if lane == "road" else None
     result = drive(log, driver, rules, snapshots=0, road=road)
@@ -108,9 +111,10 @@ def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str) -> tup
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
               max_offset_m: float = 1.0, workers: int = 1,
-              on_done: Callable[[int, int], None] | None = None, lane: str = "road") -> list[RecordingScore]:
+              on_done: Callable[[int, int], None] | None = None, lane: str = "road",
+              smooth: float | None = None) -> list[RecordingScore]:
     """Every recording under its fold's model, in ``recs`` order; ``workers`` processes at once."""
-    jobs = [(rec, root, model_for(pattern, rec), closed_loop, max_offset_m, lane) for rec in recs]
+    jobs = [(rec, root, model_for(pattern, rec), closed_loop, max_offset_m, lane, smooth) for rec in recs]
     out: list[RecordingScore | None] = [None] * len(jobs)
     if workers <= 1:
         for i, job in enumerate(jobs):

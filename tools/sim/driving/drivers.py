@@ -131,10 +131,11 @@ class OnnxDriver(LocalDriver):
         self.pipeline = DrivePipeline(model, DriveConfig(speed_limit_kmh=speed_limit_kmh,
                                                          steer_limit_deg=steer_limit_deg, tau=tau,
                                                          speed_unit=SpeedUnit(speed_unit)))
+        self.smoother = self.pipeline.smoother()  # one driver is one client: smoothed as the model asks
         self.name = f"onnx:{Path(model_path).name}"
 
     def steer(self, frame: Frame) -> SteerCommand:
-        command, _ = self.pipeline.run(frame.telemetry())
+        command, _ = self.pipeline.run(frame.telemetry(), self.smoother)
         return command
 
 
