@@ -1,0 +1,37 @@
+"""``rbc mirror``: an existing ONNX model mirror-averaged, (f(x) - f(mirror x)) / 2 (:mod:`models.mirror_onnx`):
+for models whose training run is gone; ``rbc train --mirror-average`` does the same at export."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tools.errors import CommandError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", type=Path, help="the ONNX steering model to mirror-average (left as it is)")
+    p.add_argument("--out", type=Path, required=True, help="the mirror-averaged model to write (.onnx)")
+    p.add_argument("--serve-smooth", type=float, default=1.0, metavar="ALPHA",
+                   help="also ask drive_server to smooth each client's steering with this weight of the new output, "
+                        "as rbc train --serve-smooth (default %(default)s: off)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from drive_server.smoothing import check_alpha
+    from models.mirror_onnx import MirrorError, mirror_average_onnx
+
+    if args.out.suffix != ".onnx":
+        raise CommandError(f"--out {args.out}: give a path ending in .onnx")
+    if args.out.resolve() == args.model.resolve():
+        raise CommandError("--out must not be the model itself (it is read to verify the result)")
+    if not args.model.is_file():
+        raise CommandError(f"no model at {args.model}")
+    try:
+        alpha = check_alpha(args.serve_smooth)
+        worst = mirror_average_onnx(args.model, args.out, alpha)
+    except (MirrorError, ValueError) as exc:
+        raise CommandError(str(exc)) from None
+    print(f"wrote {args.out}: (f(x) - f(mirror x)) / 2 of {args.model.name}, max |difference| {worst:.1e} on random "
+          f"inputs" + (f"; drive_server smooths its steering with {alpha:g}" if alpha < 1 else ""))
+    return 0
