@@ -58,9 +58,11 @@ class DrivePipeline:
         """A new client's smoothing state (None when off: nothing to keep)."""
         return SteeringSmoother(self.smooth) if self.smooth < OFF else None
 
-    def steer(self, rgb: np.ndarray) -> float:
-        """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``)."""
-        return self._usable(self.model.predict(preprocess(rgb, self.contract)))
+    def steer(self, rgb: np.ndarray, smoother: SteeringSmoother | None = None) -> float:
+        """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``), smoothed by the
+        client's ``smoother`` (:meth:`smoother`) if given."""
+        steering = self._usable(self.model.predict(preprocess(rgb, self.contract)))
+        return smoother(steering) if smoother is not None else steering
 
     @staticmethod
     def _usable(value: float) -> float:

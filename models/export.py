@@ -7,7 +7,6 @@ mismatch fails the run loudly instead of shipping a model that drives differentl
 
 from __future__ import annotations
 
-import json
 import logging
 import warnings
 from pathlib import Path
@@ -20,10 +19,11 @@ import torch
 from torch import nn
 
 from drive_server import runrecords
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
+from drive_server.contract import METADATA_KEY, PreprocessContract
 from drive_server.preprocess import to_input_tensor
-from drive_server.smoothing import OFF, SERVING_KEY, serving_json
+from drive_server.smoothing import OFF
 from models.nets import ContractInput
+from models.onnx_metadata import set_model_metadata
 
 log = logging.getLogger(__name__)
 
@@ -53,14 +53,7 @@ def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, An
                               input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
                               dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}})
         proto = onnx.load(str(tmp))
-        meta = {p.key: p.value for p in proto.metadata_props}
-        meta[METADATA_KEY] = contract.to_json()
-        meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
-        if serve_smooth < OFF:
-            meta[SERVING_KEY] = serving_json(serve_smooth)
-        del proto.metadata_props[:]
-        for k, v in meta.items():
-            proto.metadata_props.add(key=k, value=v)
+        set_model_metadata(proto, info, serve_smooth, contract)
         proto.producer_name = "robust-behavioral-cloning"
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))

@@ -19,7 +19,8 @@ from onnx import helper, numpy_helper
 
 from drive_server import runrecords
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
-from drive_server.smoothing import OFF, SERVING_KEY, serving_json
+from drive_server.smoothing import OFF
+from models.onnx_metadata import set_model_metadata
 
 TOLERANCE = 1e-4
 _PREFIX = "rbc_mirror_"
@@ -73,13 +74,7 @@ def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: i
     graph.node.extend(nodes)
     del graph.value_info[:]  # shapes inside changed (batch 2N); ONNX Runtime infers them again
 
-    info = {**(info if isinstance(info, dict) else {}), "mirror_average": True}
-    meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
-    if serve_smooth < OFF:
-        meta[SERVING_KEY] = serving_json(serve_smooth)
-    del proto.metadata_props[:]
-    for key, value in meta.items():
-        proto.metadata_props.add(key=key, value=value)
+    set_model_metadata(proto, {**(info if isinstance(info, dict) else {}), "mirror_average": True}, serve_smooth)
     onnx.checker.check_model(proto)
     with runrecords.atomic_path(Path(dst)) as tmp:
         onnx.save(proto, str(tmp))

@@ -29,8 +29,7 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
         smoother = pipeline.smoother()
 
         def base(view: np.ndarray, i: int) -> float:
-            value = pipeline.steer(view)
-            return smoother(value) if smoother is not None else value
+            return pipeline.steer(view, smoother)
 
         name = Path(model).name + (f" smoothed {pipeline.smooth:g}" if smoother is not None else "")
     elif baseline == "recorded":

@@ -64,9 +64,7 @@ def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
     smoother = pipeline.smoother()
     pred = np.empty(len(frames))
     for i, (path, _) in enumerate(frames):
-        pred[i] = pipeline.steer(read_jpeg_file(path, reduce=pipeline.reduce))
-        if smoother is not None:
-            pred[i] = smoother(pred[i])
+        pred[i] = pipeline.steer(read_jpeg_file(path, reduce=pipeline.reduce), smoother)
         if on_frame:
             on_frame()
     truth = np.array([steering for _, steering in frames])
