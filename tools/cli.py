@@ -62,6 +62,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
     Subcommand("import-peer", "tools.commands.import_peer", "import a peer's Keras 1 PilotNet .h5 as ONNX", "train"),
     Subcommand("mirror", "tools.commands.mirror",
                "an ONNX model answering (f(x) - f(mirror x)) / 2: its left-right lean cancelled", "train"),
+    Subcommand("ensemble", "tools.commands.ensemble",
+               "several ONNX models (e.g. one recipe, several seeds) averaged into one file", "train"),
     Subcommand("drive-log", "tools.commands.drive_log",
                "closed loop on a recorded real drive: the model sees re-projected recorded frames (DAVE-2)"),
     Subcommand("world", "tools.commands.world", "write procedural worlds (track files) or a contact sheet of them"),
