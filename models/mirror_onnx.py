@@ -4,7 +4,9 @@
 a model file whose training run is gone (the bundled generalists, a model trained elsewhere), at the ONNX
 graph level: the input and its mirror image go through the unchanged network as one batch of 2N, and the
 two halves' difference, halved, is the output. The original network's left-right lean cancels, and so
-does any constant bias. Verified against the original with ONNX Runtime before the file is kept.
+does any constant bias; so would a lean the task asks for: a model that keeps to the right lane of a
+two-lane road (the rigorous behavior) is refused. Verified against the original with ONNX Runtime before
+the file is kept.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from models.onnx_metadata import set_model_metadata
 
 TOLERANCE = 1e-4
 _PREFIX = "rbc_mirror_"
+#: behaviors that keep to a lane (trained without flips, models.behavior): mirroring would undo what they learnt
+LANE_KEEPING = frozenset({"rigorous"})
 
 
 class MirrorError(ValueError):
@@ -46,6 +50,9 @@ def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: i
     info = json.loads(meta.get(METADATA_MODEL_INFO_KEY, "{}") or "{}")
     if isinstance(info, dict) and info.get("mirror_average"):
         raise MirrorError(f"{src}: already mirror-averaged (its {METADATA_MODEL_INFO_KEY} says so)")
+    if isinstance(info, dict) and info.get("behavior") in LANE_KEEPING:
+        raise MirrorError(f"{src}: a {info['behavior']} model keeps to one lane of a two-lane road, a left-right "
+                          f"asymmetric task; the average would steer it to the road's middle")
     dims = inputs[0].type.tensor_type.shape.dim
     shape = [d.dim_value if d.HasField("dim_value") else d.dim_param or None for d in dims]
     if len(shape) != 4:

@@ -63,3 +63,25 @@ def test_bad_models_and_paths_are_one_line(tmp_path: Path, capsys: pytest.Captur
         err = capsys.readouterr().err.strip()
         assert err.startswith("rbc mirror: error") and says in err and "\n" not in err, err
     assert not (tmp_path / "again.onnx").exists() and not (tmp_path / "y.onnx").exists()
+
+
+def test_a_lane_keeping_model_is_not_mirrored_nor_trained_mirrored(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Keeping to the right lane is left-right asymmetric: the average would steer to the road's middle (the
+    mirrored generalist crossed the mountain's centre line 8 times a lap where the plain one crossed it once)."""
+    import onnx
+
+    from models.onnx_metadata import set_model_metadata
+
+    model = build_shallow(tmp_path / "rigorous.onnx", seed=4)
+    proto = onnx.load(str(model))
+    set_model_metadata(proto, {"behavior": "rigorous"})
+    onnx.save(proto, str(model))
+    capsys.readouterr()
+    assert rbc(["mirror", str(model), "--out", str(tmp_path / "m.onnx")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "keeps to one lane" in err and "\n" not in err and not (tmp_path / "m.onnx").exists()
+    assert rbc(["train", "--data", str(tmp_path), "--behavior", "rigorous", "--mirror-average",
+                "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "keeps to one lane" in err and "\n" not in err and not (tmp_path / "run").exists()

@@ -10,7 +10,9 @@ from tools.errors import CommandError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", type=Path, help="the ONNX steering model to mirror-average (left as it is)")
+    p.add_argument("model", type=Path,
+                   help="the ONNX steering model to mirror-average (left as it is; not a lane-keeping, rigorous "
+                        "model: the average drives the road's middle)")
     p.add_argument("--out", type=Path, required=True, help="the mirror-averaged model to write (.onnx)")
     p.add_argument("--serve-smooth", type=float, default=1.0, metavar="ALPHA",
                    help="also ask drive_server to smooth each client's steering with this weight of the new output, "
