@@ -20,7 +20,7 @@ from onnx import compose, helper
 
 from drive_server import runrecords
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
-from drive_server.smoothing import OFF, SERVING_KEY, serving_alpha
+from drive_server.smoothing import SERVING_KEY, serving_alpha
 from models.onnx_metadata import set_model_metadata
 
 TOLERANCE = 1e-4
@@ -110,9 +110,7 @@ def ensemble_onnx(srcs: Sequence[Path], dst: Path, serve_smooth: float | None = 
     info = {**(infos[0] if isinstance(infos[0], dict) else {}),
             "ensemble": [{"file": Path(s).name, **(i if isinstance(i, dict) else {})} for s, i in zip(srcs, infos,
                                                                                                     strict=True)]}
-    info.pop("serve_smooth", None)
-    if alpha < OFF:
-        info["serve_smooth"] = alpha
+    info.pop("serve_smooth", None)  # the members' request; set_model_metadata records the ensemble's
     set_model_metadata(out, info, alpha, contract)
     onnx.checker.check_model(out)
     with runrecords.atomic_path(Path(dst)) as tmp:

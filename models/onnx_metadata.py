@@ -16,6 +16,8 @@ def set_model_metadata(proto: Any, info: dict[str, Any], serve_smooth: float = O
     meta = {p.key: p.value for p in proto.metadata_props}
     if contract is not None:
         meta[METADATA_KEY] = contract.to_json()
+    if serve_smooth < OFF:  # the model's record says what it asks, as rbc train's does
+        info = {**info, "serve_smooth": serve_smooth}
     meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
     if serve_smooth < OFF:
         meta[SERVING_KEY] = serving_json(serve_smooth)

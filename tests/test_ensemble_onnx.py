@@ -36,8 +36,8 @@ def test_the_ensemble_answers_the_mean_of_its_members_and_keeps_their_contract(t
     served = SteeringModel(out)
     assert served.contract == SteeringModel(members[0]).contract and served.smooth == 0.5
     meta = ort.InferenceSession(str(out)).get_modelmeta().custom_metadata_map
-    assert [m["file"] for m in json.loads(meta[METADATA_MODEL_INFO_KEY])["ensemble"]] == ["m0.onnx", "m1.onnx",
-                                                                                         "m2.onnx"]
+    info = json.loads(meta[METADATA_MODEL_INFO_KEY])
+    assert [m["file"] for m in info["ensemble"]] == ["m0.onnx", "m1.onnx", "m2.onnx"] and info["serve_smooth"] == 0.5
 
 
 def test_the_members_smoothing_is_kept_when_they_agree_and_must_be_chosen_when_they_do_not(tmp_path: Path) -> None:

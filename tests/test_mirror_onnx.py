@@ -43,7 +43,8 @@ def test_the_mirrored_model_is_half_the_difference_of_the_original_on_a_frame_an
     import onnxruntime
 
     meta = onnxruntime.InferenceSession(str(out)).get_modelmeta().custom_metadata_map
-    assert json.loads(meta[METADATA_MODEL_INFO_KEY])["mirror_average"] is True and METADATA_KEY in meta
+    info = json.loads(meta[METADATA_MODEL_INFO_KEY])
+    assert info["mirror_average"] is True and info["serve_smooth"] == 0.5 and METADATA_KEY in meta
 
 
 def test_bad_models_and_paths_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
