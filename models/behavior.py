@@ -36,6 +36,13 @@ BEHAVIOR_SPECS: dict[Behavior, BehaviorSpec] = {
     Behavior.COLLISION: BehaviorSpec(0.8, 5, AugmentSpec(perspective=0.0, flip=0.5)),  # one camera
 }
 
+
+def keeps_lane(behavior: str | None) -> bool:
+    """Whether ``behavior`` keeps to one lane of a two-lane road: a left-right asymmetric task, so it trains
+    without flips, and averaging with the mirrored frame (``--mirror-average``, ``rbc mirror``) would undo it."""
+    return behavior in set(Behavior) and BEHAVIOR_SPECS[Behavior(behavior)].augment.flip == 0.0
+
+
 #: NVIDIA's approach (Table 10, left column): no side cameras, no shadows/pan/tilt; random flip, a
 #: horizontal viewpoint shift of up to 25 px with 0.004 steering per pixel, and milder brightness.
 NVIDIA_AUGMENT = AugmentSpec(perspective=0.0, shadow=0.0, brightness=0.4, flip=0.5, pan=0.0, tilt=0.0, shift=0.5,

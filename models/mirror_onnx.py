@@ -11,7 +11,6 @@ the file is kept.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -20,14 +19,13 @@ import onnxruntime as ort
 from onnx import helper, numpy_helper
 
 from drive_server import runrecords
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
+from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.smoothing import OFF
-from models.onnx_metadata import set_model_metadata
+from models.behavior import keeps_lane
+from models.onnx_metadata import read_steering_graph, set_model_metadata
 
 TOLERANCE = 1e-4
 _PREFIX = "rbc_mirror_"
-#: behaviors that keep to a lane (trained without flips, models.behavior): mirroring would undo what they learnt
-LANE_KEEPING = frozenset({"rigorous"})
 
 
 class MirrorError(ValueError):
@@ -37,33 +35,18 @@ class MirrorError(ValueError):
 def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: int = 0) -> float:
     """Write ``dst`` (atomically) from ``src``; return the max |mirrored - (f(x) - f(mirror x)) / 2| on random
     inputs (``seed``). ``serve_smooth`` < 1 also asks drive_server to smooth each client's steering so."""
-    try:
-        proto = onnx.load(str(src))
-    except Exception as exc:  # not a file, not protobuf, truncated: whatever onnx raises
-        first = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
-        raise MirrorError(f"{src}: not an ONNX model ({first})") from None
-    graph = proto.graph
-    inputs = [i for i in graph.input if i.name not in {t.name for t in graph.initializer}]
-    if len(inputs) != 1 or len(graph.output) != 1:
-        raise MirrorError(f"{src}: expected one image input and one steering output")
-    meta = {p.key: p.value for p in proto.metadata_props}
-    info = json.loads(meta.get(METADATA_MODEL_INFO_KEY, "{}") or "{}")
-    if isinstance(info, dict) and info.get("mirror_average"):
+    model = read_steering_graph(src, MirrorError)
+    proto, graph, info, shape, contract = model.proto, model.proto.graph, model.info, model.shape, model.contract
+    if info.get("mirror_average"):
         raise MirrorError(f"{src}: already mirror-averaged (its {METADATA_MODEL_INFO_KEY} says so)")
-    if isinstance(info, dict) and info.get("behavior") in LANE_KEEPING:
+    if keeps_lane(info.get("behavior")):
         raise MirrorError(f"{src}: a {info['behavior']} model keeps to one lane of a two-lane road, a left-right "
                           f"asymmetric task; the average would steer it to the road's middle")
-    dims = inputs[0].type.tensor_type.shape.dim
-    shape = [d.dim_value if d.HasField("dim_value") else d.dim_param or None for d in dims]
-    if len(shape) != 4:
-        raise MirrorError(f"{src}: the input must have rank 4, not {len(shape)}")
     if isinstance(shape[0], int):
         raise MirrorError(f"{src}: the input has a fixed batch of {shape[0]}: the mirrored frame cannot run beside it")
-    contract = (PreprocessContract.from_json(meta[METADATA_KEY]) if METADATA_KEY in meta
-                else infer_contract(tuple(shape)))
     width_axis = 2 if contract.layout == "nhwc" else 3
 
-    image, steering = inputs[0].name, graph.output[0].name
+    image, steering = model.input_name, model.output_name
     both, pair, first, second, diff = (f"{_PREFIX}{n}" for n in ("both", "pair", "first", "second", "diff"))
     for node in graph.node:  # the network now reads the batch of 2N and writes the pair
         node.input[:] = [both if n == image else n for n in node.input]
@@ -81,7 +64,7 @@ def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: i
     graph.node.extend(nodes)
     del graph.value_info[:]  # shapes inside changed (batch 2N); ONNX Runtime infers them again
 
-    set_model_metadata(proto, {**(info if isinstance(info, dict) else {}), "mirror_average": True}, serve_smooth)
+    set_model_metadata(proto, {**info, "mirror_average": True}, serve_smooth)
     onnx.checker.check_model(proto)
     with runrecords.atomic_path(Path(dst)) as tmp:
         onnx.save(proto, str(tmp))

@@ -1,12 +1,56 @@
-"""What a model file says about itself: the ONNX metadata that training and ``rbc mirror`` write (torch-free)."""
+"""What a model file says about itself: the ONNX metadata that training, ``rbc mirror`` and ``rbc ensemble``
+write, and the one-image-in, one-steering-out graph the latter two rewrite (torch-free)."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
+from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
 from drive_server.smoothing import OFF, SERVING_KEY, serving_json
+
+
+@dataclass(frozen=True)
+class SteeringGraph:
+    """An ONNX steering model as read from its file: the graph and what its metadata says."""
+
+    proto: Any  # onnx.ModelProto
+    input_name: str
+    output_name: str
+    shape: tuple[int | str | None, ...]  # the input's dimensions; a name or None where not fixed
+    contract: PreprocessContract  # its metadata's, else inferred from the input shape
+    meta: dict[str, str]
+    info: dict[str, Any]  # its record (rbc.model), {} if none
+
+
+def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
+    """``src`` as a :class:`SteeringGraph`; ``error`` (one line) if it is not ONNX or not one rank-4 image in and
+    one steering out."""
+    import onnx
+
+    try:
+        proto = onnx.load(str(src))
+    except Exception as exc:  # not a file, not protobuf, truncated: whatever onnx raises
+        first = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
+        raise error(f"{src}: not an ONNX model ({first})") from None
+    graph = proto.graph
+    inputs = [i for i in graph.input if i.name not in {t.name for t in graph.initializer}]
+    if len(inputs) != 1 or len(graph.output) != 1:
+        raise error(f"{src}: expected one image input and one steering output")
+    dims = inputs[0].type.tensor_type.shape.dim
+    shape = tuple(d.dim_value if d.HasField("dim_value") else d.dim_param or None for d in dims)
+    if len(shape) != 4:
+        raise error(f"{src}: the input must have rank 4, not {len(shape)}")
+    meta = {p.key: p.value for p in proto.metadata_props}
+    try:
+        contract = PreprocessContract.from_json(meta[METADATA_KEY]) if METADATA_KEY in meta else infer_contract(shape)
+        info = json.loads(meta.get(METADATA_MODEL_INFO_KEY, "{}") or "{}")
+    except ValueError as exc:  # json.JSONDecodeError is one
+        raise error(f"{src}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    return SteeringGraph(proto, inputs[0].name, graph.output[0].name, shape, contract, meta,
+                         info if isinstance(info, dict) else {})
 
 
 def set_model_metadata(proto: Any, info: dict[str, Any], serve_smooth: float = OFF,

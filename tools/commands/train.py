@@ -95,9 +95,6 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.data and not args.resume:
         raise CommandError("no training data", "give at least one --data DIR (a folder rbc collect wrote)")
-    if args.mirror_average and args.behavior == "rigorous":
-        raise CommandError("--mirror-average: the rigorous behavior keeps to one lane of a two-lane road, a left-right "
-                           "asymmetric task (trained without flips); the average would steer it to the road's middle")
     min_speed, min_unit = parse_speed(args.min_speed, args.speed_unit)
     config = TrainConfig(data=args.data, out=args.out, behavior=args.behavior, arch=args.arch,
                          approach=args.approach, epochs=args.epochs, aug_loops=args.aug_loops,
