@@ -34,7 +34,7 @@ from models.checkpoint import RunDirError, State, load_checkpoint, save_checkpoi
 from models.export import export_onnx
 from models.fastaug import FastAugmenter, training_contract
 from models.metrics import metrics_by_group, steering_metrics
-from models.nets import MirrorAveraged, build_model, count_parameters
+from models.nets import MirrorAveraged, OutputScaled, build_model, count_parameters
 from models.train_config import TrainConfig
 from models.train_record import config_record
 from models.trainingdata import PreparedData, prepare_data
@@ -229,6 +229,8 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
         exported_epoch = state.best_epoch
     if config.mirror_average:  # what is exported is what is scored below
         model = MirrorAveraged(model)
+    if config.output_scale != 1.0:
+        model = OutputScaled(model, config.output_scale)
     predicted = predict(model, data, pipeline, data.val, config.batch_size)
     metrics = steering_metrics(predicted, data.steering[data.val])
     by_recording = [{"log": str(data.dataset.reports[g].log), **m} for g, m in
@@ -239,7 +241,8 @@ def _finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tr
             "parameters": count_parameters(model), "code_version": runrecords.code_version(),
             "split": config.split, "export": config.export, "exported_epoch": exported_epoch,
             "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"], "camera_rig": data_rig(config.data),
-            "mirror_average": config.mirror_average, "serve_smooth": config.serve_smooth}
+            "mirror_average": config.mirror_average, "output_scale": config.output_scale,
+            "serve_smooth": config.serve_smooth}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = run_dir / runfiles.MODEL
     diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.serve_smooth)

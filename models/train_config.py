@@ -94,6 +94,9 @@ class TrainConfig:
     yaw_gain: float = 1.0
     # not in the paper: export (f(x) - f(mirror x)) / 2 (models.nets.MirrorAveraged); training is unchanged
     mirror_average: bool = False
+    # not in the paper: the exported model's steering times this (models.nets.OutputScaled; 1: as trained);
+    # training is unchanged
+    output_scale: float = 1.0
     # how drive_server smooths each client's steering unless told otherwise (drive_server.smoothing; 1: off),
     # written into the model's metadata
     serve_smooth: float = 1.0
@@ -121,6 +124,8 @@ class TrainConfig:
             raise ValueError(f"--mirror-average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
                              f"left-right asymmetric task (trained without flips); the average would steer it to the "
                              f"road's middle")
+        if not 0.1 <= self.output_scale <= 2.0:
+            raise ValueError(f"output scale must be 0.1..2, got {self.output_scale}")
         if not 0.0 < self.serve_smooth <= 1.0:
             raise ValueError(f"serve smoothing must be above 0 and at most 1 (1: off), got {self.serve_smooth}")
         if not 0.0 <= self.centre_gain <= 1.0:

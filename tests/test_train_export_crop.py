@@ -87,15 +87,20 @@ def test_crop_is_carried_through_the_contract_and_served_identically(tmp_path: P
     assert np.abs(full.astype(int) - trained_on[:1]).mean() > 5
 
 
-def test_mirror_average_and_serve_smooth_are_exported_and_recorded(tmp_path: Path) -> None:
-    result = train(_config(tmp_path / "mirror", epochs=1, max_steps_per_epoch=2, export="last", mirror_average=True,
-                           serve_smooth=0.5))
+def _frames_and_network_outputs(result) -> tuple[np.ndarray, ...]:
+    """Eight sample frames, their mirror images, and the trained network's (checkpoint's) answers to both."""
     checkpoint = torch.load(result.run_dir / "checkpoint.pt", weights_only=False)
     samples, _ = read_log(SAMPLE)
     x = to_input_tensor(build_cache(samples[:8], PreprocessContract(), ("center",), workers=1).frames[0],
                         PreprocessContract())
     mirrored = np.ascontiguousarray(x[:, :, ::-1])  # NHWC: the width axis
-    plain, plain_mirrored = _torch_outputs(checkpoint["model"], x), _torch_outputs(checkpoint["model"], mirrored)
+    return x, mirrored, _torch_outputs(checkpoint["model"], x), _torch_outputs(checkpoint["model"], mirrored)
+
+
+def test_mirror_average_and_serve_smooth_are_exported_and_recorded(tmp_path: Path) -> None:
+    result = train(_config(tmp_path / "mirror", epochs=1, max_steps_per_epoch=2, export="last", mirror_average=True,
+                           serve_smooth=0.5))
+    x, mirrored, plain, plain_mirrored = _frames_and_network_outputs(result)
     assert np.abs(plain + plain_mirrored).max() > 1e-3  # the trained network alone is not symmetric
     got, got_mirrored = _onnx_outputs(result.onnx, x), _onnx_outputs(result.onnx, mirrored)
     assert np.abs(got - 0.5 * (plain - plain_mirrored)).max() < 1e-4
@@ -105,6 +110,21 @@ def test_mirror_average_and_serve_smooth_are_exported_and_recorded(tmp_path: Pat
     record = json.loads((result.run_dir / "config.json").read_text())
     assert meta["mirror_average"] is True and record["config"]["mirror_average"] is True
     assert SteeringModel(result.onnx).smooth == 0.5 and record["config"]["serve_smooth"] == 0.5
+
+
+def test_output_scale_multiplies_what_is_exported_and_is_recorded(tmp_path: Path) -> None:
+    result = train(_config(tmp_path / "scaled", epochs=1, max_steps_per_epoch=2, export="last", mirror_average=True,
+                           output_scale=0.8))
+    x, mirrored, plain, plain_mirrored = _frames_and_network_outputs(result)
+    want = 0.8 * 0.5 * (plain - plain_mirrored)
+    assert np.abs(want).max() > 1e-3
+    assert np.abs(_onnx_outputs(result.onnx, x) - want).max() < 1e-4
+    meta = json.loads(ort.InferenceSession(str(result.onnx)).get_modelmeta().custom_metadata_map[
+        METADATA_MODEL_INFO_KEY])
+    record = json.loads((result.run_dir / "config.json").read_text())
+    assert meta["output_scale"] == 0.8 and record["config"]["output_scale"] == 0.8
+    with pytest.raises(ValueError, match="output scale"):
+        _config(tmp_path / "bad", output_scale=0.0)
 
 
 def test_inspect_scores_validation_frames_only_and_says_so(tmp_path: Path, capsys) -> None:

@@ -63,6 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "steering for the mirrored frame (one batch of two): a mirrored road gets exactly the "
                              "opposite answer, and the network's left-right noise cancels. Training is unchanged; "
                              "inference costs two passes")
+    parser.add_argument("--output-scale", type=float, default=TrainConfig.output_scale, metavar="S",
+                        help="not in the paper: the exported model's steering times S, 0.1..2 (S < 1 shrinks the "
+                             "answers towards 0 for drivers the model never saw; training is unchanged; default "
+                             "%(default)s: as trained)")
     parser.add_argument("--serve-smooth", type=float, default=TrainConfig.serve_smooth, metavar="ALPHA",
                         help="written into the model: drive_server (and rbc score, drive-log, data crossval) smooth "
                              "each client's steering over time with this weight of the new output unless --smooth says "
@@ -106,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
                          centre_gain=args.centre_gain, edge_gain=args.edge_gain, edge_margin=args.edge_margin,
                          recovery_distance=args.recovery_distance, yaw_aug=args.yaw_aug, yaw_range=args.yaw_range,
                          yaw_gain=args.yaw_gain, mirror_average=args.mirror_average,
+                         output_scale=args.output_scale,
                          serve_smooth=args.serve_smooth,
                          threads=args.threads, progress=not args.no_progress, **preprocess_options(args))
     result = train(config, resume=args.resume)
