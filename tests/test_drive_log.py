@@ -112,3 +112,22 @@ def test_calibration_finds_the_side_cameras_on_their_sides(capsys: pytest.Captur
     rows = {line.split()[0]: line.split() for line in capsys.readouterr().out.splitlines()[1:]}
     assert float(rows["left"][3]) < -0.2 and float(rows["right"][3]) > 0.2
     assert 2.0 < float(rows["left"][2]) < 12.0
+
+
+def test_a_person_drives_the_time_a_takeover_costs_before_handing_back(tmp_path: Path) -> None:
+    """Eq. 2 charges 6 s per take-over: the time a person drives. Handing back at once (DAVE-2's simulator)
+    charged a spot the driver cannot pass again every few frames."""
+    data = _curve_log(tmp_path, speed_mph=10.0)
+    records = {}
+    for handback in ("0", "6"):
+        out = tmp_path / f"r{handback}.json"
+        assert main(["drive-log", "--data", str(data), "--baseline", "zero", "--lane", "path", "--max-offset", "0.3",
+                     "--wheelbase", "2.6", "--handback", handback, "--json", str(out), "--strip",
+                     str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png")]) == 0
+        records[handback] = json.loads(out.read_text())
+    at_once, after = records["0"], records["6"]
+    assert at_once["rules"]["handback_s"] == 0 and after["rules"]["handback_s"] == 6
+    times = [t["time_s"] for t in after["takeovers"]]
+    assert at_once["interventions"] >= 3 and 1 <= after["interventions"] < at_once["interventions"]
+    assert np.all(np.diff(times) >= 6.0)
+    assert after["driving_time_s"] == pytest.approx(at_once["driving_time_s"], rel=0.1)

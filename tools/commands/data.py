@@ -97,6 +97,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cv.add_argument("--max-offset", type=float, default=1.0, metavar="M",
                     help="with --lane path: metres off the recorded path at which a person takes over, as rbc "
                          "drive-log (default %(default)s)")
+    cv.add_argument("--handback", type=float, default=None, metavar="S",
+                    help="closed loop: seconds a person drives after a take-over before handing back, as rbc "
+                         "drive-log (default: its 6)")
     add_smooth_argument(cv)
     cv.add_argument("--workers", type=int, default=2, help="recordings scored at once (default %(default)s)")
     cv.add_argument("--json", type=Path, default=None, metavar="OUT", help="also write every score as JSON")
@@ -115,16 +118,20 @@ def run(args: argparse.Namespace) -> int:
 def _crossval(args: argparse.Namespace) -> int:
     from drive_server.runrecords import code_version, write_json
     from tools.console import Progress
+    from tools.drivelog.loop import LoopRules
     from tools.errors import CommandError
     from tools.realdata.crossval import FOLD_FIELD, format_tables, model_for, score_all, summarise
     from tools.realdata.recordings import public_recordings, require_fetched, select
 
     alpha = smooth_alpha(args)
+    handback = LoopRules.handback_s if args.handback is None else args.handback
     recs = select(public_recordings(), args.track, args.name)
     if not recs:
         raise CommandError("no public recording among those named")
     if not 1 <= args.workers <= 64 or not 0.05 <= args.max_offset <= 10:
         raise CommandError("--workers must be 1..64 and --max-offset 0.05..10 metres")
+    if args.handback is not None and not 0 <= args.handback <= 60:
+        raise CommandError("--handback must be 0..60 seconds")
     missing = [str(p) for p in {model_for(args.models, r) for r in recs} | ({Path(args.peer)} if args.peer else set())
                if not p.is_file()]
     if missing:
@@ -138,14 +145,15 @@ def _crossval(args: argparse.Namespace) -> int:
         progress = Progress(f"crossval {what}", unit="recording")
         try:
             results[what] = score_all(recs, args.root, pattern, closed, args.max_offset, args.workers,
-                                      on_done=progress, lane=args.lane, smooth=alpha if what == "folds" else None)
+                                      on_done=progress, lane=args.lane, smooth=alpha if what == "folds" else None,
+                                      handback_s=handback)
         finally:
             progress.close()
     print(format_tables(results["folds"], results.get("peer", ())))
     if args.json:
         write_json(args.json, {"code_version": code_version(), "root": str(args.root), "models": args.models,
                                "peer": args.peer, "closed_loop": closed, "lane": args.lane,
-                               "max_offset_m": args.max_offset, "smooth": alpha,
+                               "max_offset_m": args.max_offset, "smooth": alpha, "handback_s": handback,
                                **{what: {"recordings": [s.as_dict() for s in scores],
                                          "tracks": [t.__dict__ for t in summarise(scores)]}
                                   for what, scores in results.items()}})

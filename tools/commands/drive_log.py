@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "each recorded frame; path: when the car is --max-offset from the driver's own line (DAVE-2)")
     p.add_argument("--max-offset", type=float, default=LoopRules.max_offset_m, metavar="M",
                    help="with --lane path: metres off the driver's line at which a person takes over (DAVE-2: 1 m)")
+    p.add_argument("--handback", type=float, default=LoopRules.handback_s, metavar="S",
+                   help="after a take-over the person drives the recorded path S seconds before handing back (the "
+                        "6 s Eq. 2 charges for it; 0: at once, as DAVE-2's simulator) (default %(default)s)")
     p.add_argument("--views", choices=("nearest", "centre"), default=LoopRules.views,
                    help="nearest: re-project the nearest of the three recorded cameras (the side ones are real views "
                         "0.95 m to each side); centre: the centre camera only (DAVE-2)")
@@ -61,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("nobody to drive", "give --model M.onnx, --baseline recorded or --baseline zero")
     if not 0.05 <= args.max_offset <= 10:
         raise CommandError("--max-offset must be 0.05..10 metres")
+    if not 0 <= args.handback <= 60:
+        raise CommandError("--handback must be 0..60 seconds")
     if not 0 <= args.speed_limit <= 300:
         raise CommandError("--speed-limit must be 0..300 km/h (0: the recorded speed)")
     return _drive(args, samples)
@@ -79,7 +84,7 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     driver, name = make_driver(log, args.model, args.baseline, args.steer_bias, smooth_alpha(args))
     wheelbase, fit = _wheelbase(args, log)
     rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset, views=args.views, wheelbase_m=wheelbase,
-                      speed_limit_kmh=args.speed_limit)
+                      speed_limit_kmh=args.speed_limit, handback_s=args.handback)
     road = _road(log, rules) if rules.lane == "road" else None
     progress = Progress("drive-log", unit="frame")
     try:

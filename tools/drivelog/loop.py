@@ -11,7 +11,10 @@ driver's steering moves it (Frenet-frame kinematics of a bicycle along a path of
 A person takes over when the car leaves the road, its side past an edge line found in the recorded frame
 (:mod:`tools.drivelog.road`; ``lane="road"``), or, as NVIDIA's DAVE-2 evaluation did on roads with lanes,
 when ``|e|`` exceeds 1 m from the driver's own line (``lane="path"``); the person puts the car back on the
-recorded path, and every take-over costs 6 s of autonomy (the paper's Eq. 1).
+recorded path and drives it along that path for the 6 s that every take-over costs (the paper's Eq. 1-2:
+an interference takes 6 s), then hands back. DAVE-2's simulator handed back at once (``handback_s=0``), so
+a spot the model cannot drive (the bridge, a faded edge line) was charged 6 s again every few frames, for
+what a person beside the car meets as one take-over.
 
 The view is re-projected from the nearest of the three recorded cameras: the left and right ones are real
 views 0.95 m to each side, so a car up to about 1.4 m off the driver's line is never shown a view moved
@@ -55,8 +58,13 @@ class LoopRules:
     # the speed a model is deployed at (the paper's 25 km/h)
     speed_limit_kmh: float = 25.0
     seconds_per_intervention: float = 6.0  # the paper's Eq. 1 (after DAVE-2)
+    # after a take-over the person drives the recorded path this long (s of the log) before handing back: the
+    # time Eq. 2 charges for it (0: at once, as DAVE-2's simulator; the measure before December 2026)
+    handback_s: float = 6.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.handback_s <= 60.0:
+            raise ValueError(f"hand-back time must be 0..60 s, got {self.handback_s}")
         if self.lane not in ("road", "path"):
             raise ValueError(f"unknown lane rule {self.lane!r} (road or path)")
         if self.views not in ("nearest", "centre"):
@@ -168,17 +176,32 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
         arc = drive_log.arc[steps.start:steps.stop]
         s, e, psi = 0.0, 0.0, 0.0
         last = -1
+        person_until = -1.0  # log time (s) until which a person drives after a take-over
+        clock = 0.0
         for _ in range(MAX_STEPS_PER_FRAME * len(steps)):
             i = steps.start + max(0, int(np.searchsorted(arc, s, side="right")) - 1)
             if drive_log.dt[i] <= 0:  # the session's last frame
                 break
+            v, dt = min(drive_log.speed[i], cap), drive_log.dt[i]
+            clock += dt
+            if clock <= person_until:  # the person drives the recorded path; the driver is not asked
+                if v >= MOVING_MPS:
+                    moving_time += dt
+                s, e, psi = advance(s, 0.0, 0.0, v, dt, float(k_path[i]), float(k_path[i]))
+                offsets.append(0.0)
+                limits.append(frame_limits[i])
+                headings.append(0.0)
+                steer.append(float(drive_log.steering[i]))
+                if on_step and i != last:
+                    on_step(i)
+                last = i
+                continue
             view = _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera)
             delta = float(driver(view, i))
             offsets.append(e)
             limits.append(frame_limits[i])
             headings.append(math.degrees(psi))
             steer.append(delta)
-            v, dt = min(drive_log.speed[i], cap), drive_log.dt[i]
             if v >= MOVING_MPS:
                 moving_time += dt
             s, e, psi = advance(s, e, psi, v, dt, float(curvature(delta, rules.wheelbase_m)), float(k_path[i]))
@@ -190,6 +213,7 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             if over:
                 takeovers.append(Takeover(i, moving_time, e, len(offsets) - 1))
                 e, psi = 0.0, 0.0  # a person puts the car back on the recorded path
+                person_until = clock + rules.handback_s  # ... and drives it there before handing back
             if on_step and i != last:
                 on_step(i)
             last = i
