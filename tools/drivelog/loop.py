@@ -107,6 +107,7 @@ class LoopResult:
     snapshots: list[Snapshot] = field(default_factory=list)
     rules: LoopRules = LoopRules()
     limits: np.ndarray | None = None  # (steps, 2): the offsets (m) at which a take-over came, left and right
+    person: np.ndarray | None = None  # (steps,) True where a person drove after a take-over (rules.handback_s)
 
     @property
     def interventions(self) -> int:
@@ -166,6 +167,7 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
     offsets: list[float] = []
     headings: list[float] = []
     steer: list[float] = []
+    person: list[bool] = []
     takeovers: list[Takeover] = []
     shots: list[Snapshot] = []
     keep = set(np.linspace(0, n - 1, snapshots + 2).astype(int)[1:-1]) if snapshots else set()
@@ -192,6 +194,7 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 limits.append(frame_limits[i])
                 headings.append(0.0)
                 steer.append(float(drive_log.steering[i]))
+                person.append(True)
                 if on_step and i != last:
                     on_step(i)
                 last = i
@@ -202,6 +205,7 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             limits.append(frame_limits[i])
             headings.append(math.degrees(psi))
             steer.append(delta)
+            person.append(False)
             if v >= MOVING_MPS:
                 moving_time += dt
             s, e, psi = advance(s, e, psi, v, dt, float(curvature(delta, rules.wheelbase_m)), float(k_path[i]))
@@ -218,4 +222,4 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 on_step(i)
             last = i
     return LoopResult(len(offsets), moving_time, takeovers, np.array(offsets), np.array(headings),
-                      np.array(steer), shots, rules, np.array(limits).reshape(-1, 2))
+                      np.array(steer), shots, rules, np.array(limits).reshape(-1, 2), np.array(person, bool))

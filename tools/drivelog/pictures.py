@@ -14,6 +14,7 @@ from tools.drivelog.loop import LoopResult
 from tools.sim.pictures.text import draw_text
 
 _RED, _GREY, _BLUE, _WHITE = (60, 60, 230), (150, 150, 150), (200, 120, 40), (245, 245, 245)
+_PERSON = (225, 225, 255)  # light pink (BGR)
 
 
 def write_strip(result: LoopResult, path: Path, columns: int = 4) -> Path:
@@ -57,6 +58,10 @@ def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[in
         y = top + (height - top - bottom) * (0.5 - e / (2 * span))
         return int(round(x)), int(round(y))
 
+    if result.person is not None and result.person.any():  # the stretches a person drove after a take-over
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], result.person.astype(np.int8), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
+            cv2.rectangle(img, (xy(start, 0.0)[0], top), (xy(stop - 1, 0.0)[0], height - bottom), _PERSON, -1)
     if limits is not None and len(limits) > 1:
         for side in (0, 1):
             pts = np.array([xy(i, e) for i, e in enumerate(limits[:, side])], np.int32)
@@ -73,7 +78,8 @@ def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[in
     draw_text(img, f"grey: where the car leaves the lane ({lane})", (width - 330, 18), px=11, color=(90, 90, 90))
     draw_text(img, title, (left, 18), px=13, color=(30, 30, 30))
     draw_text(img, f"step of the loop (0 .. {n - 1}, one per recorded frame interval); red: take-overs "
-                   f"({result.interventions})", (left, height - 8),
+                   f"({result.interventions}); pink: a person drives ({result.rules.handback_s:g} s each)",
+              (left, height - 8),
               px=11, color=(60, 60, 60))
     _write(path, img)
     return path
