@@ -124,14 +124,16 @@ def _crossval(args: argparse.Namespace) -> int:
     from tools.realdata.recordings import public_recordings, require_fetched, select
 
     alpha = smooth_alpha(args)
-    handback = LoopRules.handback_s if args.handback is None else args.handback
     recs = select(public_recordings(), args.track, args.name)
     if not recs:
         raise CommandError("no public recording among those named")
     if not 1 <= args.workers <= 64 or not 0.05 <= args.max_offset <= 10:
         raise CommandError("--workers must be 1..64 and --max-offset 0.05..10 metres")
-    if args.handback is not None and not 0 <= args.handback <= 60:
-        raise CommandError("--handback must be 0..60 seconds")
+    try:
+        rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset,
+                          **({} if args.handback is None else {"handback_s": args.handback}))
+    except ValueError as exc:  # the rules check themselves (the hand-back time)
+        raise CommandError(f"--handback: {exc}") from None
     missing = [str(p) for p in {model_for(args.models, r) for r in recs} | ({Path(args.peer)} if args.peer else set())
                if not p.is_file()]
     if missing:
@@ -144,16 +146,15 @@ def _crossval(args: argparse.Namespace) -> int:
     for what, pattern in runs:
         progress = Progress(f"crossval {what}", unit="recording")
         try:
-            results[what] = score_all(recs, args.root, pattern, closed, args.max_offset, args.workers,
-                                      on_done=progress, lane=args.lane, smooth=alpha if what == "folds" else None,
-                                      handback_s=handback)
+            results[what] = score_all(recs, args.root, pattern, closed, rules, args.workers, on_done=progress,
+                                      smooth=alpha if what == "folds" else None)
         finally:
             progress.close()
     print(format_tables(results["folds"], results.get("peer", ())))
     if args.json:
         write_json(args.json, {"code_version": code_version(), "root": str(args.root), "models": args.models,
                                "peer": args.peer, "closed_loop": closed, "lane": args.lane,
-                               "max_offset_m": args.max_offset, "smooth": alpha, "handback_s": handback,
+                               "max_offset_m": args.max_offset, "smooth": alpha, "handback_s": rules.handback_s,
                                **{what: {"recordings": [s.as_dict() for s in scores],
                                          "tracks": [t.__dict__ for t in summarise(scores)]}
                                   for what, scores in results.items()}})

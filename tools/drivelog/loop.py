@@ -186,32 +186,21 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 break
             v, dt = min(drive_log.speed[i], cap), drive_log.dt[i]
             clock += dt
-            if clock <= person_until:  # the person drives the recorded path; the driver is not asked
-                if v >= MOVING_MPS:
-                    moving_time += dt
-                s, e, psi = advance(s, 0.0, 0.0, v, dt, float(k_path[i]), float(k_path[i]))
-                offsets.append(0.0)
-                limits.append(frame_limits[i])
-                headings.append(0.0)
-                steer.append(float(drive_log.steering[i]))
-                person.append(True)
-                if on_step and i != last:
-                    on_step(i)
-                last = i
-                continue
-            view = _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera)
-            delta = float(driver(view, i))
+            by_person = clock <= person_until  # after a take-over: the recorded path, the driver is not asked
+            view = None if by_person else _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera)
+            delta = float(drive_log.steering[i]) if view is None else float(driver(view, i))
             offsets.append(e)
             limits.append(frame_limits[i])
             headings.append(math.degrees(psi))
             steer.append(delta)
-            person.append(False)
+            person.append(by_person)
             if v >= MOVING_MPS:
                 moving_time += dt
-            s, e, psi = advance(s, e, psi, v, dt, float(curvature(delta, rules.wheelbase_m)), float(k_path[i]))
+            k_car = k_path[i] if by_person else curvature(delta, rules.wheelbase_m)
+            s, e, psi = advance(s, e, psi, v, dt, float(k_car), float(k_path[i]))
             over = not frame_limits[i, 0] <= e <= frame_limits[i, 1]
             fresh = i != last and i in keep
-            if fresh or (over and sum(x.takeover for x in shots) < snapshots):
+            if view is not None and (fresh or (over and sum(x.takeover for x in shots) < snapshots)):
                 shots.append(Snapshot(i, view, offsets[-1], headings[-1], delta, over,
                                       (float(frame_limits[i, 0]), float(frame_limits[i, 1]))))
             if over:

@@ -9,13 +9,16 @@ to the recipe, as one table: the README's and the model card's figures come from
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from tools.realdata.recordings import PublicRecording
+
+if TYPE_CHECKING:
+    from tools.drivelog.loop import LoopRules
 
 #: The placeholder of ``--models`` that becomes each recording's fold.
 FOLD_FIELD = "{fold}"
@@ -71,11 +74,10 @@ def model_for(pattern: str, rec: PublicRecording) -> Path:
 
 
 def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: bool = True,
-                    max_offset_m: float = 1.0, lane: str = "road", smooth: float | None = None,
-                    handback_s: float | None = None) -> RecordingScore:
+                    rules: LoopRules | None = None, smooth: float | None = None) -> RecordingScore:
     """Open loop on every row; closed loop too on the tracks of :data:`CLOSED_LOOP_TRACKS`; in both the model's
-    steering smoothed as drive_server would (``smooth``; None: as the model's metadata asks); ``handback_s``:
-    the closed loop's hand-back time after a take-over (None: rbc drive-log's)."""
+    steering smoothed as drive_server would (``smooth``; None: as the model's metadata asks); the closed loop
+    by ``rules`` (None: rbc drive-log's defaults), the wheelbase fitted to the recording as rbc drive-log does."""
     from tools.evaluate.offline import score_models
     from tools.realdata.stats import INTENT_FRAMES
 
@@ -83,7 +85,7 @@ def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: 
     (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES, smooth=smooth)
     eta = interventions = per_takeover = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
-        eta, interventions, per_takeover = _closed_loop(data, model, max_offset_m, lane, smooth, handback_s)
+        eta, interventions, per_takeover = _closed_loop(data, model, rules, smooth)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
                           round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover,
                           _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth)
@@ -93,8 +95,7 @@ def _rounded(value: float | None) -> float | None:
     return None if value is None or np.isnan(value) else round(value, 4)
 
 
-def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str,
-                 smooth: float | None, handback_s: float | None) -> tuple[float, int, float]:
+def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float | None) -> tuple[float, int, float]:
     from protocol.datalog import read_log
     from tools.drivelog.drivers import make_driver
     from tools.drivelog.loop import LoopRules, drive
@@ -105,19 +106,17 @@ def _closed_loop(data: Path, model: Path, max_offset_m: float, lane: str,
     log = recorded_drive(read_log(data)[0])
     wheelbase, _ = wheelbase_or_default(log)  # as rbc drive-log does
     driver, _ = make_driver(log, model, None, smooth=smooth)
-    rules = LoopRules(lane=lane, max_offset_m=max_offset_m, wheelbase_m=wheelbase,
-                      **({} if handback_s is None else {"handback_s": handback_s}))
-    road = estimate_road(log, wheelbase) if lane == "road" else None
+    rules = replace(rules or LoopRules(), wheelbase_m=wheelbase)
+    road = estimate_road(log, wheelbase) if rules.lane == "road" else None
     result = drive(log, driver, rules, snapshots=0, road=road)
     return round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2)
 
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
-              max_offset_m: float = 1.0, workers: int = 1,
-              on_done: Callable[[int, int], None] | None = None, lane: str = "road",
-              smooth: float | None = None, handback_s: float | None = None) -> list[RecordingScore]:
+              rules: LoopRules | None = None, workers: int = 1,
+              on_done: Callable[[int, int], None] | None = None, smooth: float | None = None) -> list[RecordingScore]:
     """Every recording under its fold's model, in ``recs`` order; ``workers`` processes at once."""
-    jobs = [(rec, root, model_for(pattern, rec), closed_loop, max_offset_m, lane, smooth, handback_s) for rec in recs]
+    jobs = [(rec, root, model_for(pattern, rec), closed_loop, rules, smooth) for rec in recs]
     out: list[RecordingScore | None] = [None] * len(jobs)
     if workers <= 1:
         for i, job in enumerate(jobs):
