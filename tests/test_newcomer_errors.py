@@ -193,3 +193,18 @@ def test_an_interrupted_demo_says_no_lap_was_finished(tmp_path):
     assert code == 130, out
     line = next(ln for ln in out.splitlines() if ln.startswith("degree of autonomy:"))
     assert "interrupted before the first lap was finished" in line or "laps finished: interrupted" in line, line
+
+
+def test_output_piped_into_a_reader_that_leaves_is_not_an_error(tmp_path):
+    # `rbc data fold A --root real | head -c 50` printed "rbc data: error: [Errno 32] Broken pipe (hint: is
+    # drive_server running at that address?)": a reader that has what it wants is no error, as for any Unix tool
+    import subprocess
+
+    read, write = os.pipe()
+    os.close(read)  # the reader has gone before a byte is written
+    proc = subprocess.run([sys.executable, "-m", "tools.cli", "data", "fold", "A", "--root", str(tmp_path)],
+                          stdout=write, stderr=subprocess.PIPE, text=True, timeout=60,
+                          cwd=Path(__file__).parent.parent)
+    os.close(write)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""

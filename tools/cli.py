@@ -12,6 +12,7 @@ import argparse
 import importlib
 import importlib.util
 import logging
+import os
 import sys
 from dataclasses import dataclass
 from importlib import metadata
@@ -161,10 +162,29 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except Exception as exc:  # the error boundary: see tools.errors
         remove_new_empty_outputs(created)
+        if isinstance(exc, BrokenPipeError) and _stdout_gone():
+            return 141  # the reader of our output left (`rbc data fold A | head`): quiet, as any Unix tool
         if args.verbose or not is_user_error(exc):
             raise
         print(one_line(cmd.name, exc), file=sys.stderr)
         return 2
+
+
+def _stdout_gone() -> bool:
+    """Whether standard output is a pipe whose reader has gone away (nothing more can be written to it)."""
+    import select
+
+    if not hasattr(select, "poll"):
+        return False
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        gone = any(event & select.POLLERR for _, event in poller.poll(0))
+    except (OSError, ValueError):
+        return False
+    if gone:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so the flush at exit is quiet too
+    return gone
 
 
 def package_version() -> str:
