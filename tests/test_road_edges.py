@@ -22,9 +22,12 @@ SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 ASPHALT, LINE, VERGE, SKY = (118, 118, 114), (190, 170, 60), (150, 120, 80), (120, 160, 220)
 
 
-def _render(road_left: float, road_right: float, seed: int = 0) -> np.ndarray:
+def _render(road_left: float, road_right: float, seed: int = 0,
+            patch: tuple[float, float, tuple[int, int, int]] | None = None, bricks: bool = False) -> np.ndarray:
     """A centre frame of a straight road between ``road_left`` and ``road_right`` (m, + right), yellow
-    edge lines inside, dirt outside; grainy asphalt as the lake's."""
+    edge lines inside, dirt outside; grainy asphalt as the lake's. ``patch``: (from, to, colour), a strip
+    of the road along it painted that colour (sunlit asphalt, a stain). ``bricks``: a deck of bricks
+    (0.4 m, pale, between dark mortar lines) between dark walls, as the lake's bridge, without edge lines."""
     cam = DEFAULT_CAMERA
     v, u = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
     rays = np.linalg.inv(cam.intrinsics()) @ np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
@@ -32,14 +35,23 @@ def _render(road_left: float, road_right: float, seed: int = 0) -> np.ndarray:
     down = level[1] > 1e-6
     t = np.where(down, cam.height_m / np.where(down, level[1], 1.0), 0.0)
     x = (t * level[0]).reshape(u.shape)
+    z = (t * level[2]).reshape(u.shape)
     img = np.empty((cam.height, cam.width, 3), np.float64)
     img[:] = SKY
     ground = down.reshape(u.shape)
     on_road = ground & (x > road_left) & (x < road_right)
     img[ground] = VERGE
     img[on_road] = ASPHALT
-    for edge in (road_left, road_right):
-        img[ground & (np.abs(x - edge) < 0.12)] = LINE
+    if patch is not None:
+        img[on_road & (x > patch[0]) & (x < patch[1])] = patch[2]
+    if bricks:
+        img[ground] = (20, 20, 20)  # the walls
+        img[on_road] = (150, 140, 130)  # pale bricks, near the asphalt's colour, between dark mortar lines
+        mortar = (np.abs(x / 0.4 - np.round(x / 0.4)) < 0.12) | (np.abs(z / 0.4 - np.round(z / 0.4)) < 0.12)
+        img[on_road & mortar] = 40
+    else:
+        for edge in (road_left, road_right):
+            img[ground & (np.abs(x - edge) < 0.12)] = LINE
     rng = np.random.default_rng(seed)
     img += rng.normal(0, 6, img.shape)
     return np.clip(img, 0, 255).astype(np.uint8)

@@ -99,6 +99,9 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     print(f"degree of autonomy {result.eta:.1f} %  interventions {result.interventions}  "
           f"({record['seconds_per_takeover']:.1f} s of driving per take-over)  offset rms {result.offset_rms_m:.2f} m  "
           f"max {record['offset_max_m']:.2f} m")
+    if result.off_road_s:
+        print(f"the recorded driver was off the road for {result.off_road_s:.1f} s of the log: the person drove "
+              "there (pink), not counted")
     title = f"{name} on {Path(args.data).name}: eta {result.eta:.1f} %, {result.interventions} take-overs"
     print(f"strip {write_strip(result, args.strip)}")
     print(f"plot  {write_offset_plot(result, args.plot, title)}")

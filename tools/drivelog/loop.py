@@ -14,7 +14,9 @@ when ``|e|`` exceeds 1 m from the driver's own line (``lane="path"``); the perso
 recorded path and drives it along that path for the 6 s that every take-over costs (the paper's Eq. 1-2:
 an interference takes 6 s), then hands back. DAVE-2's simulator handed back at once (``handback_s=0``), so
 a spot the model cannot drive (the bridge, a faded edge line) was charged 6 s again every few frames, for
-what a person beside the car meets as one take-over.
+what a person beside the car meets as one take-over. Where the recorded driver left the road (onto the
+dirt: :attr:`RoadEdges.off_road`) there is no road to keep to: the person drives the recorded path there,
+and that time is neither the driver's nor counted (``LoopResult.off_road_s``).
 
 The view is re-projected from the nearest of the three recorded cameras: the left and right ones are real
 views 0.95 m to each side, so a car up to about 1.4 m off the driver's line is never shown a view moved
@@ -106,6 +108,7 @@ class LoopResult:
     steering: np.ndarray  # what the driver steered at every step
     snapshots: list[Snapshot] = field(default_factory=list)
     rules: LoopRules = LoopRules()
+    off_road_s: float = 0.0  # log time where the recorded driver was off the road: driven by the person, not counted
     limits: np.ndarray | None = None  # (steps, 2): the offsets (m) at which a take-over came, left and right
     person: np.ndarray | None = None  # (steps,) True where a person drove after a take-over (rules.handback_s)
 
@@ -172,7 +175,11 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
     shots: list[Snapshot] = []
     keep = set(np.linspace(0, n - 1, snapshots + 2).astype(int)[1:-1]) if snapshots else set()
     k_path = curvature(drive_log.steering, rules.wheelbase_m)
-    moving_time = 0.0
+    # where the recorded driver left the road (onto the dirt) there is no road to keep to: the person drives
+    # the recorded path there, and that time is neither the driver's nor counted
+    off_road = road.off_road if rules.lane == "road" and road is not None and road.off_road is not None \
+        else np.zeros(n, bool)
+    moving_time = off_road_time = 0.0
     for session in np.unique(drive_log.session):
         steps = drive_log.session_range(int(session))
         arc = drive_log.arc[steps.start:steps.stop]
@@ -186,7 +193,9 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 break
             v, dt = min(drive_log.speed[i], cap), drive_log.dt[i]
             clock += dt
-            by_person = clock <= person_until  # after a take-over: the recorded path, the driver is not asked
+            # after a take-over, and where the recorded driver was off the road: the recorded path, the driver
+            # is not asked
+            by_person = clock <= person_until or bool(off_road[i])
             view = None if by_person else _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera)
             delta = float(drive_log.steering[i]) if view is None else float(driver(view, i))
             offsets.append(e)
@@ -194,7 +203,9 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             headings.append(math.degrees(psi))
             steer.append(delta)
             person.append(by_person)
-            if v >= MOVING_MPS:
+            if v >= MOVING_MPS and off_road[i]:
+                off_road_time += dt
+            elif v >= MOVING_MPS:
                 moving_time += dt
             k_car = k_path[i] if by_person else curvature(delta, rules.wheelbase_m)
             s, e, psi = advance(s, e, psi, v, dt, float(k_car), float(k_path[i]))
@@ -211,4 +222,5 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 on_step(i)
             last = i
     return LoopResult(len(offsets), moving_time, takeovers, np.array(offsets), np.array(headings),
-                      np.array(steer), shots, rules, np.array(limits).reshape(-1, 2), np.array(person, bool))
+                      np.array(steer), shots, rules, off_road_time, np.array(limits).reshape(-1, 2),
+                      np.array(person, bool))

@@ -77,8 +77,10 @@ def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[in
     lane = "road's edges" if result.rules.lane == "road" else f"{result.rules.max_offset_m:g} m from the driver's line"
     draw_text(img, f"grey: where the car leaves the lane ({lane})", (width - 330, 18), px=11, color=(90, 90, 90))
     draw_text(img, title, (left, 18), px=13, color=(30, 30, 30))
+    off_road = f", and {result.off_road_s:.0f} s where the driver left the road" if result.off_road_s else ""
     draw_text(img, f"step of the loop (0 .. {n - 1}, one per recorded frame interval); red: take-overs "
-                   f"({result.interventions}); pink: a person drives ({result.rules.handback_s:g} s each)",
+                   f"({result.interventions}); pink: a person drives ({result.rules.handback_s:g} s each"
+                   f"{off_road})",
               (left, height - 8),
               px=11, color=(60, 60, 60))
     _write(path, img)

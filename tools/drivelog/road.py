@@ -5,17 +5,25 @@ The Udacity tracks have no lanes: one road about 9 m between its edge lines, and
 of their own on it, so 1 m from one driver's line is mostly still the middle of the road. Here the road is
 found in every recorded centre frame and the car is taken over when its side passes an edge line.
 
-How: the frame is looked at from above (the calibrated ground-plane camera, 4-10 m ahead, 5 cm columns),
-straightened along the recorded path's curvature; a pixel is road when its colour is the recording's own
-asphalt (the median colour straight ahead over the whole recording, and its spread, in CIE Lab: yellow
-edge lines, dirt, grass, kerbs and water all differ in chroma); in each row the road is the run of road
-pixels through the car's own column, and an edge counts only where that run stops inside the view (a
-run that reaches the view's border says nothing about that side). What is found is where the asphalt
+How: the frame is looked at from above (the calibrated ground-plane camera, 4-7 m ahead, 5 cm columns),
+straightened along the recorded path's curvature. A pixel is road when it has the recording's own
+asphalt's colour (the median straight ahead over the whole recording, and its spread, in CIE Lab): its
+chroma within 3 spreads (yellow edge lines, dirt, grass, kerbs and water all differ in chroma) and its
+lightness within 4, each on its own (sun and shade move the asphalt's lightness across the road by more
+than its colour: a test of both together took sunlit strips for the road's end). In each row the road is
+the run of road pixels through the car's own column; a run narrower than the car is none, and an edge
+counts only where the run stops inside the view (a run that reaches the view's border says nothing about
+that side). A side's edge is the median over the rows if enough rows saw it and they agree; a side seen
+alone counts only where the other side's road ran out of the view. Frames whose ground straight ahead is
+redder than the asphalt (the bridge's bricks, dirt) are not measured. What is found is where the asphalt
 ends, the inner side of the edge line (0.2-0.3 m inside its middle on rendered test frames: the line's
-own half width and JPEG's blurred chroma), so the rule errs a little on the strict side. Per frame the
-median over rows, then a running median over frames; frames that found nothing (the bridge's bricks,
-shadows) take the road from their neighbours, a side seen alone takes the recording's median width from
-the other.
+own half width and JPEG's blurred chroma), so the rule errs a little on the strict side. Then over
+frames (:func:`_consistent`): edges at least the road's width apart (within 1 m) are kept; where a
+frame's edges are closer (a false edge) or it saw one side only, each edge it saw proposes the road's
+middle half the road's width away, and the proposal nearest what the frames around propose is kept if it
+agrees with them and leaves the recorded car on the road; then a running median over frames, and frames
+with nothing believable (the bridge) take the road from their neighbours. Where the recorded driver left
+the road (hardly any asphalt straight ahead for 10 frames or more) :attr:`RoadEdges.off_road` says so.
 """
 
 from __future__ import annotations
@@ -23,46 +31,50 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from models.labels import centred_average
 from protocol.jpeg import read_jpeg_file
-from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ground_to_pixels
+from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
 from tools.drivelog.path import RecordedDrive, curvature
+from tools.drivelog.road_view import (
+    asphalt_ahead,
+    asphalt_colour,
+    bricks_ahead,
+    frame_edges,
+    top_down,
+)
 
-#: Lateral extent and step of the top-down view (m), and the distances ahead it looks at.
-VIEW_HALF_WIDTH_M = 8.0
-COLUMN_M = 0.05
-ROWS_AHEAD_M = tuple(np.arange(4.0, 10.01, 0.5))
-#: Straight ahead: where the recording's asphalt colour is learnt (m ahead, m either side).
-ASPHALT_AHEAD_M = (4.0, 5.5)
-ASPHALT_HALF_WIDTH_M = 0.75
-#: A pixel is road within this many robust spreads of the asphalt colour (spreads floored: L, a, b).
-ROAD_DISTANCE = 3.0
-SPREAD_FLOOR = (8.0, 3.0, 3.0)
-#: Runs of road are looked at through a window this wide (m): asphalt grain and specks do not end them.
-SMOOTH_M = 0.45
-#: A frame's edge needs this many rows that saw it; the road's width must be plausible.
-MIN_ROWS = 3
-WIDTH_RANGE_M = (5.0, 14.0)
 #: Running median over frames (odd).
 MEDIAN_FRAMES = 9
 #: Road width assumed where a recording shows no road at all (m; the lake road between its lines).
 DEFAULT_WIDTH_M = 9.0
-_OUTSIDE = (255, 0, 255)  # magenta: pixels beyond the recorded frame (never asphalt)
-_OUTSIDE_LAB = cv2.cvtColor(np.uint8([[_OUTSIDE]]), cv2.COLOR_RGB2LAB)[0, 0].astype(np.float32)
+#: Edge lines found more than this closer together than the recording's road width (m): one of them is false
+#: (a sunlit patch of asphalt, a stain ends the run of road pixels mid-road). Also how far a frame's road
+#: middle may be from what the frames around it say, where it rests on one edge.
+WIDTH_TOLERANCE_M = 1.0
+#: The recorded driver is off the road where less than this share of the ground straight ahead has the
+#: asphalt's chroma for at least this many frames running (onto the grass, the dirt): no road to keep to.
+OFF_ROAD_SHARE = 0.3
+OFF_ROAD_FRAMES = 10
+#: Half the recorded car's width (m; the design card's 1.9 m car).
+CAR_HALF_WIDTH_M = 0.95
+#: Frames either side whose edges vote on where the road's middle is, when a frame's own edges disagree.
+CONSENSUS_HALF_FRAMES = 15
 
 
 @dataclass(frozen=True)
 class RoadEdges:
     """Per recorded frame: lateral position (m, + right) of the left and right edge lines from where the
-    driver's camera was, and whether that frame itself showed them (else taken from its neighbours)."""
+    driver's camera was, whether that frame itself showed them (else taken from its neighbours), and
+    whether the recorded driver had left the road there."""
 
     left_m: np.ndarray
     right_m: np.ndarray
     measured: np.ndarray
     width_m: float
+    # per frame: the recorded driver was off the road there (OFF_ROAD_SHARE); None: not looked at
+    off_road: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.left_m)
@@ -75,67 +87,12 @@ class RoadEdges:
         """One line: the road's width, how often it was seen, and where the driver kept on it."""
         driver = -(self.left_m + self.right_m) / 2  # the driver from the road's middle, + right
         median = float(np.median(driver))
+        off = int(np.sum(self.off_road)) if self.off_road is not None else 0
         return (f"road {self.width_m:.1f} m wide between its edge lines (median), seen in "
                 f"{100 * self.measured_share:.0f} % of {len(self)} frames (the others take it from their "
                 f"neighbours); the driver {abs(median):.1f} m {'right' if median > 0 else 'left'} of its middle "
-                f"(median; 5-95 %: {np.percentile(driver, 5):+.1f} .. {np.percentile(driver, 95):+.1f} m)")
-
-
-def _grid() -> tuple[np.ndarray, np.ndarray]:
-    """Lateral positions (columns) and distances ahead (rows) of the top-down view, metres."""
-    xs = np.arange(-VIEW_HALF_WIDTH_M, VIEW_HALF_WIDTH_M + COLUMN_M / 2, COLUMN_M)
-    return xs, np.asarray(ROWS_AHEAD_M)
-
-
-def top_down(frame: np.ndarray, kappa: float, camera: UnityCamera = DEFAULT_CAMERA) -> np.ndarray:
-    """Lab top-down view (rows: distance ahead, columns: lateral; uint8, as OpenCV's 8-bit Lab: a long
-    recording's views are kept until the asphalt colour is known), straightened along curvature ``kappa``."""
-    xs, zs = _grid()
-    x, z = np.meshgrid(xs, zs)
-    u, v = ground_to_pixels(camera, x + 0.5 * kappa * z * z, z)
-    view = cv2.remap(frame, u.astype(np.float32), v.astype(np.float32), cv2.INTER_AREA,
-                     borderMode=cv2.BORDER_CONSTANT, borderValue=_OUTSIDE)
-    outside = (u < 0) | (u > camera.width - 1) | (v < 0) | (v > camera.bonnet_row - 1)
-    view[outside] = _OUTSIDE
-    return cv2.cvtColor(view, cv2.COLOR_RGB2LAB)
-
-
-def asphalt_colour(views: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """(median, robust spread) of the Lab colour straight ahead over many frames."""
-    xs, zs = _grid()
-    rows = (zs >= ASPHALT_AHEAD_M[0]) & (zs <= ASPHALT_AHEAD_M[1])
-    cols = np.abs(xs) <= ASPHALT_HALF_WIDTH_M
-    patch = np.concatenate([v[rows][:, cols].reshape(-1, 3) for v in views]).astype(np.float32)
-    median = np.median(patch, axis=0)
-    spread = 1.4826 * np.median(np.abs(patch - median), axis=0)
-    return median, np.maximum(spread, SPREAD_FLOOR)
-
-
-def frame_edges(view: np.ndarray, median: np.ndarray, spread: np.ndarray) -> tuple[float, float]:
-    """(left, right) edge positions of one top-down view (NaN where that side was not seen)."""
-    xs, _ = _grid()
-    view = view.astype(np.float32)
-    distance = np.sqrt((((view - median) / spread) ** 2).sum(-1))
-    window = max(1, int(round(SMOOTH_M / COLUMN_M)) | 1)
-    road = cv2.blur((distance < ROAD_DISTANCE).astype(np.float32), (window, 1)) > 0.5
-    outside = np.all(view == _OUTSIDE_LAB, axis=-1)
-    centre = len(xs) // 2
-    lefts, rights = [], []
-    for row, out in zip(road, outside, strict=True):
-        if not row[centre]:
-            continue
-        stops = np.flatnonzero(~row)
-        left_stop = stops[stops < centre]
-        right_stop = stops[stops > centre]
-        if len(left_stop) and not out[left_stop[-1]]:
-            lefts.append(xs[left_stop[-1]] + COLUMN_M / 2)
-        if len(right_stop) and not out[right_stop[0]]:
-            rights.append(xs[right_stop[0]] - COLUMN_M / 2)
-    left = float(np.median(lefts)) if len(lefts) >= MIN_ROWS else np.nan
-    right = float(np.median(rights)) if len(rights) >= MIN_ROWS else np.nan
-    if np.isfinite(left) and np.isfinite(right) and not WIDTH_RANGE_M[0] <= right - left <= WIDTH_RANGE_M[1]:
-        return np.nan, np.nan
-    return left, right
+                f"(median; 5-95 %: {np.percentile(driver, 5):+.1f} .. {np.percentile(driver, 95):+.1f} m)"
+                + (f"; off the road in {off} frames" if off else ""))
 
 
 def _running_median(values: np.ndarray, frames: int) -> np.ndarray:
@@ -167,16 +124,67 @@ def estimate_road(drive: RecordedDrive, wheelbase_m: float, camera: UnityCamera 
         if on_frame:
             on_frame(i + 1, len(drive))
     median, spread = asphalt_colour(views)
-    raw = np.array([frame_edges(v, median, spread) for v in views]).reshape(-1, 2)
+    raw = np.array([(np.nan, np.nan) if bricks_ahead(v, median) else frame_edges(v, median, spread)
+                    for v in views]).reshape(-1, 2)
+    bare = np.array([asphalt_ahead(v, median, spread) < OFF_ROAD_SHARE for v in views], bool)
     both = np.isfinite(raw).all(axis=1)
     width = float(np.median(raw[both, 1] - raw[both, 0])) if both.any() else DEFAULT_WIDTH_M
     measured = np.isfinite(raw).any(axis=1)
-    left = np.where(np.isfinite(raw[:, 0]), raw[:, 0], raw[:, 1] - width)
-    right = np.where(np.isfinite(raw[:, 1]), raw[:, 1], raw[:, 0] + width)
     out_left, out_right = np.empty(len(drive)), np.empty(len(drive))
+    off_road = np.zeros(len(drive), bool)
     for session in np.unique(drive.session):
         steps = drive.session_range(int(session))
         sl = slice(steps.start, steps.stop)
-        out_left[sl] = _fill(_running_median(left[sl], MEDIAN_FRAMES), -width / 2)
-        out_right[sl] = _fill(_running_median(right[sl], MEDIAN_FRAMES), width / 2)
-    return RoadEdges(out_left, out_right, measured, width)
+        left, right = _consistent(raw[sl], width)
+        out_left[sl] = _fill(_running_median(left, MEDIAN_FRAMES), -width / 2)
+        out_right[sl] = _fill(_running_median(right, MEDIAN_FRAMES), width / 2)
+        off_road[sl] = _long_runs(bare[sl], OFF_ROAD_FRAMES)
+    return RoadEdges(out_left, out_right, measured, width, off_road)
+
+
+def _long_runs(flags: np.ndarray, frames: int) -> np.ndarray:
+    """``flags`` kept only where they run on for at least ``frames`` frames."""
+    out = np.zeros(len(flags), bool)
+    start = None
+    for i, flag in enumerate([*flags, False]):
+        if flag and start is None:
+            start = i
+        elif not flag and start is not None:
+            out[start:i] = i - start >= frames
+            start = None
+    return out
+
+
+def _consistent(raw: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame the (left, right) edges from what it saw (``raw``; NaN: not seen), checked against the
+    road's width and the frames around it.
+
+    Edges the road's width apart (within ``WIDTH_TOLERANCE_M``) are kept, and so are edges further apart: a
+    wider road (the bridge between its walls). Around each frame the road is as wide as the median of the
+    kept frames within ``CONSENSUS_HALF_FRAMES`` (the recording's width where there are none). Edges closer
+    together than that mean one of them is false (a false edge only ever ends the road early), and a side
+    seen alone may be: each seen edge proposes a middle half the road's width from itself, and the
+    proposal nearest the median of what the frames around propose wins if it is within the tolerance of
+    it (the driver's place on the road changes slowly, a false edge comes and goes); else the frame is
+    not believed.
+    """
+    n, half = len(raw), CONSENSUS_HALF_FRAMES
+    span = raw[:, 1] - raw[:, 0]
+    kept = np.isfinite(span) & (span >= width - WIDTH_TOLERANCE_M)
+    kept_span = np.where(kept, span, np.nan)
+    local = np.array([np.nanmedian(w) if np.isfinite(w).any() else width
+                      for w in (kept_span[max(0, i - half):i + half + 1] for i in range(n))])
+    proposals = np.stack([raw[:, 0] + local / 2, raw[:, 1] - local / 2], axis=1)
+    left, right = np.where(kept, raw[:, 0], np.nan), np.where(kept, raw[:, 1], np.nan)
+    for i in np.flatnonzero(~kept):
+        seen = proposals[i][np.isfinite(proposals[i])]
+        if not len(seen):
+            continue
+        consensus = np.nanmedian(proposals[max(0, i - half):i + half + 1])
+        middle = seen[np.argmin(np.abs(seen - consensus))]
+        lo, hi = middle - local[i] / 2, middle + local[i] / 2
+        # believed if it agrees with the frames around and leaves the recorded car on the road: a lone edge
+        # further out than that is not the road's (the bridge's wall, with the deck wider than the road)
+        if abs(middle - consensus) <= WIDTH_TOLERANCE_M and lo < -CAR_HALF_WIDTH_M and hi > CAR_HALF_WIDTH_M:
+            left[i], right[i] = lo, hi
+    return left, right
