@@ -168,12 +168,11 @@ def _consistent(raw: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
     it (the driver's place on the road changes slowly, a false edge comes and goes); else the frame is
     not believed.
     """
-    n, half = len(raw), CONSENSUS_HALF_FRAMES
+    half = CONSENSUS_HALF_FRAMES
     span = raw[:, 1] - raw[:, 0]
     kept = np.isfinite(span) & (span >= width - WIDTH_TOLERANCE_M)
-    kept_span = np.where(kept, span, np.nan)
-    local = np.array([np.nanmedian(w) if np.isfinite(w).any() else width
-                      for w in (kept_span[max(0, i - half):i + half + 1] for i in range(n))])
+    local = _running_median(np.where(kept, span, np.nan), 2 * half + 1)
+    local = np.where(np.isfinite(local), local, width)
     proposals = np.stack([raw[:, 0] + local / 2, raw[:, 1] - local / 2], axis=1)
     left, right = np.where(kept, raw[:, 0], np.nan), np.where(kept, raw[:, 1], np.nan)
     for i in np.flatnonzero(~kept):
