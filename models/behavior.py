@@ -6,6 +6,7 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
+from models.architectures import ARCHITECTURES
 from models.augment import AugmentSpec
 from protocol.facts import BEHAVIORS
 
@@ -21,6 +22,7 @@ class Approach(StrEnum):
 class Arch(StrEnum):
     SHALLOW = "shallow"
     PILOTNET = "pilotnet"
+    SHALLOW_WIDE = "shallow-wide"  # not in the paper: models.architectures.SHALLOW_WIDE
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,14 @@ def keeps_lane(behavior: str | None) -> bool:
     """Whether ``behavior`` keeps to one lane of a two-lane road: a left-right asymmetric task, so it trains
     without flips, and averaging with the mirrored frame (``--mirror-average``, ``rbc mirror``) would undo it."""
     return behavior in set(Behavior) and BEHAVIOR_SPECS[Behavior(behavior)].augment.flip == 0.0
+
+
+def check_output_scale(scale: float) -> float:
+    """``scale`` if an exported model may answer that many times its network (``--output-scale``, not in the
+    paper: a model fitted to the drivers it saw answers a new driver more strongly than they steer)."""
+    if not 0.1 <= scale <= 2.0:
+        raise ValueError(f"output scale must be 0.1..2, got {scale:g}")
+    return scale
 
 
 #: NVIDIA's approach (Table 10, left column): no side cameras, no shadows/pan/tilt; random flip, a
@@ -64,12 +74,12 @@ class Pipeline:
 
 
 def pipeline_for(behavior: Behavior | str, arch: Arch | str, approach: Approach | str) -> Pipeline:
-    """The paper's pipeline ("ours"; 200x66 for PilotNet) or NVIDIA's, for one behavior."""
+    """The paper's pipeline ("ours", at the network's own input size: 200x66 for PilotNet) or NVIDIA's, for one
+    behavior."""
     spec = BEHAVIOR_SPECS[Behavior(behavior)]
-    arch, approach = Arch(arch), Approach(approach)
-    if approach is Approach.NVIDIA:
+    net = ARCHITECTURES[Arch(arch).value]
+    if Approach(approach) is Approach.NVIDIA:
         augment = NVIDIA_AUGMENT if spec.augment.flip else replace(NVIDIA_AUGMENT, flip=0.0)
-        contract = NVIDIA_CONTRACT if arch is Arch.PILOTNET else replace(NVIDIA_CONTRACT, width=64, height=64)
-        return Pipeline(contract, augment, 0.0, spec.epochs)
-    contract = PAPER_CONTRACT if arch is Arch.SHALLOW else replace(PAPER_CONTRACT, width=200, height=66)
+        return Pipeline(replace(NVIDIA_CONTRACT, width=net.width, height=net.height), augment, 0.0, spec.epochs)
+    contract = replace(PAPER_CONTRACT, width=net.width, height=net.height)
     return Pipeline(contract, spec.augment, spec.deletion_rate, spec.epochs)

@@ -21,7 +21,7 @@ from onnx import helper, numpy_helper
 from drive_server import runrecords
 from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.smoothing import OFF
-from models.behavior import keeps_lane
+from models.behavior import check_output_scale, keeps_lane
 from models.onnx_metadata import read_steering_graph, set_model_metadata
 
 TOLERANCE = 1e-4
@@ -32,9 +32,15 @@ class MirrorError(ValueError):
     """The model cannot be mirror-averaged; the message is one line."""
 
 
-def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: int = 0) -> float:
-    """Write ``dst`` (atomically) from ``src``; return the max |mirrored - (f(x) - f(mirror x)) / 2| on random
-    inputs (``seed``). ``serve_smooth`` < 1 also asks drive_server to smooth each client's steering so."""
+def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: int = 0,
+                        output_scale: float = 1.0) -> float:
+    """Write ``dst`` (atomically) from ``src``; return the max |mirrored - S (f(x) - f(mirror x)) / 2| on random
+    inputs (``seed``), S = ``output_scale`` (as ``rbc train --output-scale``). ``serve_smooth`` < 1 also asks
+    drive_server to smooth each client's steering so."""
+    try:
+        check_output_scale(output_scale)
+    except ValueError as exc:
+        raise MirrorError(str(exc)) from None
     model = read_steering_graph(src, MirrorError)
     proto, graph, info, shape, contract = model.proto, model.proto.graph, model.info, model.shape, model.contract
     if info.get("mirror_average"):
@@ -53,7 +59,7 @@ def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: i
         node.output[:] = [pair if n == steering else n for n in node.output]
     consts = {"starts": [-1], "ends": [np.iinfo(np.int64).min], "axes": [width_axis], "steps": [-1]}
     graph.initializer.extend(numpy_helper.from_array(np.array(v, np.int64), f"{_PREFIX}{k}") for k, v in consts.items())
-    graph.initializer.append(numpy_helper.from_array(np.array(0.5, np.float32), f"{_PREFIX}half"))
+    graph.initializer.append(numpy_helper.from_array(np.array(0.5 * output_scale, np.float32), f"{_PREFIX}half"))
     head = [helper.make_node("Slice", [image, *(f"{_PREFIX}{k}" for k in consts)], [f"{_PREFIX}mirrored"]),
             helper.make_node("Concat", [image, f"{_PREFIX}mirrored"], [both], axis=0)]
     tail = [helper.make_node("Split", [pair], [first, second], axis=0),
@@ -64,17 +70,18 @@ def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: i
     graph.node.extend(nodes)
     del graph.value_info[:]  # shapes inside changed (batch 2N); ONNX Runtime infers them again
 
-    set_model_metadata(proto, {**info, "mirror_average": True}, serve_smooth)
+    scale = {"output_scale": float(info.get("output_scale", 1.0)) * output_scale} if output_scale != 1.0 else {}
+    set_model_metadata(proto, {**info, "mirror_average": True, **scale}, serve_smooth)
     onnx.checker.check_model(proto)
     with runrecords.atomic_path(Path(dst)) as tmp:
         onnx.save(proto, str(tmp))
-        worst = _verify(Path(src), tmp, contract, width_axis, seed)
+        worst = _verify(Path(src), tmp, contract, width_axis, seed, output_scale)
     return worst
 
 
-def _verify(src: Path, dst: Path, contract: PreprocessContract, width_axis: int, seed: int) -> float:
-    """The mirrored file against the original on random inputs, singly and as a batch; MirrorError beyond
-    ``TOLERANCE``."""
+def _verify(src: Path, dst: Path, contract: PreprocessContract, width_axis: int, seed: int, scale: float) -> float:
+    """The mirrored file against ``scale`` times the original's average on random inputs, singly and as a
+    batch; MirrorError beyond ``TOLERANCE``."""
     rng = np.random.default_rng(seed)
     x = (rng.random((4, *contract.input_shape[1:]), dtype=np.float32) - 0.5).astype(np.float32)
     original, mirrored = (ort.InferenceSession(str(p), providers=["CPUExecutionProvider"]) for p in (src, dst))
@@ -82,9 +89,9 @@ def _verify(src: Path, dst: Path, contract: PreprocessContract, width_axis: int,
     def run(session: ort.InferenceSession, batch: np.ndarray) -> np.ndarray:
         return session.run(None, {session.get_inputs()[0].name: batch})[0].reshape(len(batch), -1)
 
-    want = 0.5 * (run(original, x) - run(original, np.ascontiguousarray(np.flip(x, axis=width_axis))))
+    want = 0.5 * scale * (run(original, x) - run(original, np.ascontiguousarray(np.flip(x, axis=width_axis))))
     got = np.concatenate([run(mirrored, x[i:i + 1]) for i in range(len(x))])
     worst = float(max(np.abs(got - want).max(), np.abs(run(mirrored, x) - want).max()))
     if not np.isfinite(worst) or worst >= TOLERANCE:
-        raise MirrorError(f"{dst}: the mirrored model differs from (f(x) - f(mirror x)) / 2 by {worst:.3g}")
+        raise MirrorError(f"{dst}: the mirrored model differs from {scale:g} (f(x) - f(mirror x)) / 2 by {worst:.3g}")
     return worst

@@ -8,7 +8,8 @@ from pathlib import Path
 from models.runfiles import CONFIG, HISTORY, read_history
 
 ARCHITECTURES = {"shallow": "The paper's shallow CNN (14,065 parameters, 64x64 input)",
-                 "pilotnet": "NVIDIA's PilotNet (252,219 parameters, 200x66 input)"}
+                 "pilotnet": "NVIDIA's PilotNet (252,219 parameters, 200x66 input)",
+                 "shallow-wide": "The shallow CNN, twice the width and filters (46,065 parameters, 128x64 input)"}
 
 
 def _approach(approach: str, resolved: dict) -> str:

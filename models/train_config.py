@@ -11,7 +11,15 @@ import numpy as np
 from drive_server.contract import ContractError, PreprocessContract
 from models import geometry
 from models.augment import AugmentSpec
-from models.behavior import AUGMENTATION_LOOPS, BATCH_SIZE, LEARNING_RATE, Pipeline, keeps_lane, pipeline_for
+from models.behavior import (
+    AUGMENTATION_LOOPS,
+    BATCH_SIZE,
+    LEARNING_RATE,
+    Pipeline,
+    check_output_scale,
+    keeps_lane,
+    pipeline_for,
+)
 from models.split import SplitSpec
 from models.trainingdata import DataOptions
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
@@ -124,8 +132,7 @@ class TrainConfig:
             raise ValueError(f"--mirror-average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
                              f"left-right asymmetric task (trained without flips); the average would steer it to the "
                              f"road's middle")
-        if not 0.1 <= self.output_scale <= 2.0:
-            raise ValueError(f"output scale must be 0.1..2, got {self.output_scale}")
+        check_output_scale(self.output_scale)
         if not 0.0 < self.serve_smooth <= 1.0:
             raise ValueError(f"serve smoothing must be above 0 and at most 1 (1: off), got {self.serve_smooth}")
         if not 0.0 <= self.centre_gain <= 1.0:

@@ -15,11 +15,11 @@ onnx = pytest.importorskip("onnx", reason="the benchmark models are built with t
 ort = pytest.importorskip("onnxruntime")
 
 from drive_server.contract import METADATA_KEY, PreprocessContract  # noqa: E402
-from models.architectures import PILOTNET, SHALLOW  # noqa: E402
+from models.architectures import PILOTNET, SHALLOW, SHALLOW_WIDE  # noqa: E402
 from tools.bench.onnx_builders import ARCHS, build_model, count_parameters  # noqa: E402
 
 
-@pytest.mark.parametrize(("arch", "params"), [(SHALLOW, 14_065), (PILOTNET, 252_219)])
+@pytest.mark.parametrize(("arch", "params"), [(SHALLOW, 14_065), (PILOTNET, 252_219), (SHALLOW_WIDE, 46_065)])
 def test_builders_match_the_papers_architectures(arch, params):
     model = build_model(arch, seed=0)
     assert count_parameters(model) == params

@@ -31,8 +31,9 @@ def test_a_lake_recording_is_scored_open_and_closed_loop() -> None:
     assert s.frames == 36 and s.zero_mse > 0 and -1 <= s.pearson_r <= 1
     assert -1 <= s.r_to_intent <= 1 and s.r_to_intent != s.pearson_r and 0 < s.intent_r < 1
     assert s.eta is not None and 0 <= s.eta <= 100 and s.interventions >= 0 and s.seconds_per_takeover > 0
+    assert s.off_road_s is not None and s.off_road_s >= 0 and "off_road_s" in s.as_dict()  # as drive-log's JSON
     jungle = score_recording(_rec(track="jungle"), DATA, MODEL)  # hills: not re-projected over flat ground
-    assert jungle.eta is None and jungle.mse == s.mse
+    assert jungle.eta is None and jungle.off_road_s is None and jungle.mse == s.mse
 
 
 def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:

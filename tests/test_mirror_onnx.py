@@ -57,13 +57,31 @@ def test_bad_models_and_paths_are_one_line(tmp_path: Path, capsys: pytest.Captur
              ([str(not_onnx), "--out", str(tmp_path / "y.onnx")], "not an ONNX model"),
              ([str(tmp_path / "missing.onnx"), "--out", str(tmp_path / "z.onnx")], "no model at"),
              ([str(original), "--out", str(original)], "must not be the model itself"),
-             ([str(original), "--out", str(tmp_path / "w.onnx"), "--serve-smooth", "0"], "above 0")]
+             ([str(original), "--out", str(tmp_path / "w.onnx"), "--serve-smooth", "0"], "above 0"),
+             ([str(original), "--out", str(tmp_path / "v.onnx"), "--output-scale", "3"], "output scale must be 0.1..2")]
     capsys.readouterr()
     for argv, says in cases:
         assert rbc(["mirror", *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("rbc mirror: error") and says in err and "\n" not in err, err
     assert not (tmp_path / "again.onnx").exists() and not (tmp_path / "y.onnx").exists()
+    assert not (tmp_path / "v.onnx").exists()
+
+
+def test_a_model_trained_elsewhere_is_mirrored_and_scaled_as_rbc_train_would_export_it(tmp_path: Path) -> None:
+    """``--output-scale S``: S (f(x) - f(mirror x)) / 2, recorded, so a model whose run is gone gets the recipe's
+    scale too (before, only re-exporting from a training checkpoint could scale one)."""
+    original = build_shallow(tmp_path / "m.onnx", seed=3)
+    plain, scaled = tmp_path / "plain.onnx", tmp_path / "scaled.onnx"
+    assert rbc(["mirror", str(original), "--out", str(plain)]) == 0
+    assert rbc(["mirror", str(original), "--out", str(scaled), "--output-scale", "0.8"]) == 0
+    x = np.random.default_rng(2).random((5, *SteeringModel(original).contract.input_shape[1:]), dtype=np.float32)
+    assert np.allclose(_run(scaled, x - 0.5), 0.8 * _run(plain, x - 0.5), atol=1e-6)
+    import onnxruntime
+
+    info = json.loads(onnxruntime.InferenceSession(str(scaled)).get_modelmeta().custom_metadata_map[
+        METADATA_MODEL_INFO_KEY])
+    assert info["output_scale"] == pytest.approx(0.8) and info["mirror_average"] is True
 
 
 def test_a_lane_keeping_model_is_not_mirrored_nor_trained_mirrored(tmp_path: Path,

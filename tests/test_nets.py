@@ -53,7 +53,7 @@ def test_contract_input_takes_nhwc_and_matches_nchw() -> None:
     assert torch.allclose(a, b, atol=1e-6) and torch.allclose(b, c, atol=1e-6)
 
 
-@pytest.mark.parametrize("name", ["shallow", "pilotnet"])
+@pytest.mark.parametrize("name", ["shallow", "pilotnet", "shallow-wide"])
 def test_torch_and_onnx_builders_make_the_same_layers_from_the_one_table(name):
     """The random-weight ONNX networks of the tests and benchmarks are the trained architectures."""
     pytest.importorskip("onnx")
@@ -65,3 +65,14 @@ def test_torch_and_onnx_builders_make_the_same_layers_from_the_one_table(name):
     onnx_shapes = [tuple(t.dims) for t in build_onnx(spec).graph.initializer]
     assert torch_shapes == onnx_shapes
     assert sum(int(torch.tensor(s).prod()) for s in torch_shapes) == spec.params
+
+
+@pytest.mark.parametrize(("arch", "size"),
+                         [("shallow", (64, 64)), ("pilotnet", (200, 66)), ("shallow-wide", (128, 64))])
+@pytest.mark.parametrize("approach", ["ours", "nvidia"])
+def test_each_network_is_fed_at_its_own_input_size(arch, size, approach):
+    """The contract a run trains and serves with is the network's size, whichever approach."""
+    from models.behavior import pipeline_for
+
+    contract = pipeline_for("simplistic", arch, approach).contract
+    assert (contract.width, contract.height) == size

@@ -15,7 +15,8 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--behavior", choices=[b.value for b in Behavior], default=TrainConfig.behavior,
                         help="driving behavior: sets zero-steer balancing, augmentations and epochs (paper Tables 4-6)")
     parser.add_argument("--arch", choices=[a.value for a in Arch], default=TrainConfig.arch,
-                        help="network: the paper's shallow CNN or NVIDIA's PilotNet")
+                        help="network: the paper's shallow CNN, NVIDIA's PilotNet, or the shallow CNN at 128x64 "
+                             "with twice the filters (shallow-wide, not in the paper)")
     parser.add_argument("--approach", choices=[a.value for a in Approach], default=TrainConfig.approach,
                         help="ours: the paper's balancing + augmentation; nvidia: crop/YUV, no balancing")
 

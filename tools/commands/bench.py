@@ -18,8 +18,10 @@ log = logging.getLogger("rbc.bench")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--server", default=None, help="benchmark a running server at this URL instead of starting one")
     p.add_argument("--model", type=Path, default=None, help="ONNX model (default: build --arch with random weights)")
-    p.add_argument("--arch", choices=("shallow", "pilotnet", "both"), default="shallow",
-                   help="architecture(s) to build when no --model is given (default shallow)")
+    from models.architectures import ARCHITECTURES  # the layer tables only: no torch, no onnx
+
+    p.add_argument("--arch", choices=(*ARCHITECTURES, "both"), default="shallow",
+                   help="architecture to build when no --model is given; both: shallow and pilotnet (default shallow)")
     p.add_argument("--frames", type=int, default=2000, help="measured frames per client (default 2000)")
     p.add_argument("--warmup", type=int, default=200, help="unmeasured frames per client first (default 200)")
     p.add_argument("--clients", type=int, default=1, help="concurrent closed-loop clients, one process each")

@@ -17,6 +17,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--serve-smooth", type=float, default=1.0, metavar="ALPHA",
                    help="also ask drive_server to smooth each client's steering with this weight of the new output, "
                         "as rbc train --serve-smooth (default %(default)s: off)")
+    p.add_argument("--output-scale", type=float, default=1.0, metavar="S",
+                   help="the mirrored model answers S times the average, as rbc train --output-scale (0.1..2; "
+                        "default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,9 +34,10 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"no model at {args.model}")
     try:
         alpha = check_alpha(args.serve_smooth)
-        worst = mirror_average_onnx(args.model, args.out, alpha)
+        worst = mirror_average_onnx(args.model, args.out, alpha, output_scale=args.output_scale)
     except (MirrorError, ValueError) as exc:
         raise CommandError(str(exc)) from None
-    print(f"wrote {args.out}: (f(x) - f(mirror x)) / 2 of {args.model.name}, max |difference| {worst:.1e} on random "
-          f"inputs" + (f"; drive_server smooths its steering with {alpha:g}" if alpha < 1 else ""))
+    scale = f"{args.output_scale:g} x " if args.output_scale != 1.0 else ""
+    print(f"wrote {args.out}: {scale}(f(x) - f(mirror x)) / 2 of {args.model.name}, max |difference| {worst:.1e} "
+          f"on random inputs" + (f"; drive_server smooths its steering with {alpha:g}" if alpha < 1 else ""))
     return 0

@@ -47,6 +47,7 @@ class RecordingScore:
     r_to_intent: float | None = None
     intent_r: float | None = None
     smooth: float = 1.0  # the model's steering smoothed as drive_server does (drive_server.smoothing; 1: not)
+    off_road_s: float | None = None  # closed loop: log time the recorded driver was off the road (not counted)
 
     @property
     def beats_zero(self) -> bool:
@@ -83,19 +84,21 @@ def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: 
 
     data = root / rec.name
     (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES, smooth=smooth)
-    eta = interventions = per_takeover = None
+    eta = interventions = per_takeover = off_road = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
-        eta, interventions, per_takeover = _closed_loop(data, model, rules, smooth)
+        eta, interventions, per_takeover, off_road = _closed_loop(data, model, rules, smooth)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
                           round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover,
-                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth)
+                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth, off_road)
 
 
 def _rounded(value: float | None) -> float | None:
     return None if value is None or np.isnan(value) else round(value, 4)
 
 
-def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float | None) -> tuple[float, int, float]:
+def _closed_loop(data: Path, model: Path, rules: LoopRules | None,
+                 smooth: float | None) -> tuple[float, int, float, float]:
+    """eta, take-overs, seconds driven per take-over, and seconds the recorded driver was off the road."""
     from protocol.datalog import read_log
     from tools.drivelog.drivers import make_driver
     from tools.drivelog.loop import LoopRules, drive
@@ -109,7 +112,8 @@ def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float
     rules = replace(rules or LoopRules(), wheelbase_m=wheelbase)
     road = estimate_road(log, wheelbase) if rules.lane == "road" else None
     result = drive(log, driver, rules, snapshots=0, road=road)
-    return round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2)
+    return (round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2),
+            round(result.off_road_s, 2))
 
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
