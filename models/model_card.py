@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from models.architectures import ARCHITECTURES as TABLES
 from models.runfiles import CONFIG, HISTORY, read_history
 
-ARCHITECTURES = {"shallow": "The paper's shallow CNN (14,065 parameters, 64x64 input)",
-                 "pilotnet": "NVIDIA's PilotNet (252,219 parameters, 200x66 input)",
-                 "shallow-wide": "The shallow CNN, twice the width and filters (46,065 parameters, 128x64 input)"}
+_NAMES = {"shallow": "The paper's shallow CNN", "pilotnet": "NVIDIA's PilotNet",
+          "shallow-wide": "The shallow CNN, twice the width and filters"}
+#: Each network's card line; sizes from its layer table (models.architectures), said there once.
+ARCHITECTURES = {n: f"{_NAMES[n]} ({a.params:,} parameters, {a.width}x{a.height} input)" for n, a in TABLES.items()}
 
 
 def _approach(approach: str, resolved: dict) -> str:
