@@ -1,6 +1,6 @@
 """The preprocessing contract a model carries in its ONNX metadata.
 
-Training writes it (``models.export``), the drive server reads it: the keys are defined here
+Training writes it (``models.onnxfiles.export``), the drive server reads it: the keys are defined here
 and only here. A model without the metadata gets the paper's default, inferred from its input
 shape.
 """

@@ -1,11 +1,13 @@
 """The driving-log format (Udacity ``driving_log.csv``, the paper's ``Driving-Log.csv``) and its tolerant reader.
 
-Real logs are messy: no header or a header row, absolute Windows paths from another machine, ``", "``
-separators, ``7.8E-05`` numbers, one camera (empty left/right fields) or three. Only the file name of
-a recorded path is trusted: images are looked up next to the log (``DIR/IMG/<name>`` first). Bad rows
-are skipped and reported with file and line so a broken recording is noticed, never silently trained on.
-A missing or unreadable side frame (left/right) only costs that row its sides: the centre frame and the
-label are still good, and copies of recordings often carry the centre camera alone.
+Real logs are messy: no header or a header row (one naming the seven columns out of order was typed by
+hand: they are read in the simulator's order), absolute Windows paths from another machine, ``", "``
+separators, ``7.8E-05`` numbers, LF, CRLF or CR-only line ends, one camera (empty left/right fields) or
+three. Only the file name of a recorded path is trusted: images are looked up next to the log
+(``DIR/IMG/<name>`` first). Bad rows are skipped and reported with file and line so a broken recording
+is noticed, never silently trained on. A missing or unreadable side frame (left/right) only costs that
+row its sides: the centre frame and the label are still good, and copies of recordings often carry the
+centre camera alone.
 Stdlib only; the writer is :mod:`protocol.datalog_writer`.
 """
 
@@ -181,6 +183,12 @@ def _header_columns(cells: Sequence[str], log_path: Path, line: int) -> dict[str
     missing = [c for c in ("center", "steering") if c not in names]
     if missing:
         raise DataLogError(f"{log_path}:{line}: header row lacks column(s) {missing}")
+    if len(cells) == len(COLUMNS) and set(names) == set(COLUMNS) and list(names) != list(COLUMNS):
+        # The simulators write these seven columns in this one order and no header: a header naming them in
+        # another order was typed over such a log by hand (one public log has steering,speed,throttle,brake
+        # over steering, throttle, brake and speed values), so the order wins over the names.
+        log.info("%s:%d: header names the columns out of the simulator's order; read in its order", log_path, line)
+        return positional_columns(len(COLUMNS))
     return {c: names[c] for c in COLUMNS if c in names}
 
 

@@ -70,8 +70,8 @@ def test_train_stamps_the_rig_of_its_data_into_the_model(tmp_path):
     pytest.importorskip("torch")
     import shutil
 
-    from models.train import train
-    from models.train_config import TrainConfig
+    from models.training.train import train
+    from models.training.train_config import TrainConfig
 
     data = tmp_path / "sim"
     shutil.copytree(SAMPLE, data)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models.labels import centred_average
+from models.data.labels import centred_average
 from protocol.datalog import read_log
 from protocol.datalog_writer import LogWriter, frame_name, parse_frame_stamp
 from tests.conftest import UDACITY_SAMPLE

@@ -1,4 +1,4 @@
-"""``rbc ensemble`` / ``models.ensemble_onnx``: several ONNX models averaged into one file, checked against
+"""``rbc ensemble`` / ``models.onnxfiles.ensemble_onnx``: several ONNX models averaged into one file, checked against
 its members, their contract kept, mismatched members and bad files refused in one line."""
 
 from __future__ import annotations

@@ -177,9 +177,9 @@ def test_recording_on_a_full_disk_drives_on_keeps_whole_rows_and_records_again_o
 def test_train_stops_on_a_full_disk_keeps_its_last_checkpoint_and_resume_ends_as_a_clean_run(small_disk, tmp_path,
                                                                                             monkeypatch, capsys):
     pytest.importorskip("torch")
-    import models.train as train_mod
-    from models.checkpoint import save_checkpoint
-    from models.runfiles import read_history
+    import models.training.train as train_mod
+    from models.networks.checkpoint import save_checkpoint
+    from models.training.runfiles import read_history
 
     flags = ["train", "--data", str(SAMPLE_LOG), "--epochs", "3", "--max-steps-per-epoch", "3", "--threads", "1",
              "--no-progress", "--seed", "3"]

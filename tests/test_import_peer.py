@@ -151,7 +151,7 @@ def test_metadata_names_the_source_and_the_yuv_mode(imported):
 
 
 def test_the_real_files_hash_is_credited_to_its_commit(tmp_path, monkeypatch):
-    from models import peer_keras
+    from models.onnxfiles import peer_keras
 
     write_keras1_h5(tmp_path / "model.h5")
     weights = peer_keras.read_peer_h5(tmp_path / "model.h5")
@@ -163,7 +163,7 @@ def test_the_real_files_hash_is_credited_to_its_commit(tmp_path, monkeypatch):
 def test_the_yuv_modes_are_opencvs_conversions(mode, code):
     import torch
 
-    from models.peer_keras import OpenCVYuv, yuv_matrix
+    from models.onnxfiles.peer_keras import OpenCVYuv, yuv_matrix
 
     images = _network_images(3, seed=7)
     m, offset = yuv_matrix(mode)

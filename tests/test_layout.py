@@ -154,7 +154,7 @@ def test_no_import_cycles():
 
 @pytest.mark.parametrize("contract", [PAPER_CONTRACT, NVIDIA_CONTRACT], ids=["paper", "nvidia"])
 def test_serving_and_training_decode_a_frame_identically(contract):
-    from models.framecache import build_cache, load_frame
+    from models.data.framecache import build_cache, load_frame
 
     samples, _ = read_log(SAMPLE)
     samples = samples[:6]

@@ -1,4 +1,4 @@
-"""``rbc mirror`` / ``models.mirror_onnx``: an existing ONNX model made to answer (f(x) - f(mirror x)) / 2,
+"""``rbc mirror`` / ``models.onnxfiles.mirror_onnx``: an existing ONNX model made to answer (f(x) - f(mirror x)) / 2,
 checked against the original, its contract kept, bad files refused in one line."""
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ def test_a_lane_keeping_model_is_not_mirrored_nor_trained_mirrored(tmp_path: Pat
     mirrored generalist crossed the mountain's centre line 8 times a lap where the plain one crossed it once)."""
     import onnx
 
-    from models.onnx_metadata import set_model_metadata
+    from models.onnxfiles.onnx_metadata import set_model_metadata
 
     model = build_shallow(tmp_path / "rigorous.onnx", seed=4)
     proto = onnx.load(str(model))

@@ -8,7 +8,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from models.nets import ContractInput, PilotNet, ShallowCNN, build_model, conv_activations, count_parameters  # noqa: E402
+from models.networks.nets import ContractInput, PilotNet, ShallowCNN, build_model, conv_activations, count_parameters  # noqa: E402
 
 
 def test_parameter_counts_match_the_papers() -> None:
@@ -57,7 +57,7 @@ def test_contract_input_takes_nhwc_and_matches_nchw() -> None:
 def test_torch_and_onnx_builders_make_the_same_layers_from_the_one_table(name):
     """The random-weight ONNX networks of the tests and benchmarks are the trained architectures."""
     pytest.importorskip("onnx")
-    from models.architectures import ARCHITECTURES
+    from models.networks.architectures import ARCHITECTURES
     from tools.bench.onnx_builders import build_model as build_onnx
 
     spec = ARCHITECTURES[name]
@@ -72,7 +72,7 @@ def test_torch_and_onnx_builders_make_the_same_layers_from_the_one_table(name):
 @pytest.mark.parametrize("approach", ["ours", "nvidia"])
 def test_each_network_is_fed_at_its_own_input_size(arch, size, approach):
     """The contract a run trains and serves with is the network's size, whichever approach."""
-    from models.behavior import pipeline_for
+    from models.training.behavior import pipeline_for
 
     contract = pipeline_for("simplistic", arch, approach).contract
     assert (contract.width, contract.height) == size

@@ -23,7 +23,7 @@ from drive_server.preprocess import frame_to_network_image, jpeg_reduction, prep
 onnx = pytest.importorskip("onnx", reason="the tests build their ONNX models with the onnx package")
 
 from drive_server.model import ModelError, SteeringModel  # noqa: E402
-from models.architectures import PILOTNET, SHALLOW  # noqa: E402
+from models.networks.architectures import PILOTNET, SHALLOW  # noqa: E402
 from tools.bench.onnx_builders import build_model, save_model  # noqa: E402
 
 FRAME = cv2.cvtColor(cv2.imread(str(next((SAMPLE_LOG / "IMG").glob("center_*.jpg")))), cv2.COLOR_BGR2RGB)

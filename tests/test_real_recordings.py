@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models.split import SplitSpec, block_split, make_split
-from models.train_config import TrainConfig
+from models.data.split import SplitSpec, block_split, make_split
+from models.training.train_config import TrainConfig
 from protocol.datalog import read_log
 from protocol.datalog_writer import LogWriter
 from tools.arguments import parse_speed
@@ -76,8 +76,8 @@ def _log_with_speeds(folder: Path, speeds: list[float]) -> Path:
 ])
 def test_min_speed_drops_slow_rows_in_its_own_unit(tmp_path: Path, log_unit: str, threshold: float, unit: str,
                                                    dropped: int) -> None:
-    from models.behavior import pipeline_for
-    from models.trainingdata import DataOptions, prepare_data
+    from models.data.trainingdata import DataOptions, prepare_data
+    from models.training.behavior import pipeline_for
 
     data = _log_with_speeds(tmp_path / "rec", [0.0, 3.0, 4.9, 5.0, 10.0, 30.0] * 3)
     options = DataOptions(SplitSpec("random"), threshold, unit, log_unit)
@@ -114,7 +114,7 @@ def test_train_prints_the_row_summary(tmp_path: Path, capsys) -> None:
 # ---- brightness -----------------------------------------------------------------------------------------------
 
 def test_scale_brightness_keeps_a_dark_frame_visible() -> None:
-    from models.augment import brightness
+    from models.augmentation.augment import brightness
 
     dark = np.full((4, 4, 3), 40, np.uint8)
     assert brightness(dark, -80.0).max() == 0  # the paper's additive beta blacks it out
@@ -124,10 +124,10 @@ def test_scale_brightness_keeps_a_dark_frame_visible() -> None:
 def test_fast_path_applies_the_scale_mode_like_the_reference() -> None:
     from dataclasses import replace
 
-    from models.augment import brightness, no_augmentation
-    from models.behavior import pipeline_for
-    from models.fastaug import FastAugmenter
-    from models.framecache import build_cache
+    from models.augmentation.augment import brightness, no_augmentation
+    from models.augmentation.fastaug import FastAugmenter
+    from models.data.framecache import build_cache
+    from models.training.behavior import pipeline_for
 
     samples, _ = read_log(SAMPLE)
     p = pipeline_for("simplistic", "shallow", "ours")
@@ -152,8 +152,8 @@ def test_config_pipeline_carries_crop_and_brightness() -> None:
 
 
 def test_smoothed_labels_train_but_never_score_and_never_leak() -> None:
-    from models.behavior import pipeline_for
-    from models.trainingdata import DataOptions, prepare_data
+    from models.data.trainingdata import DataOptions, prepare_data
+    from models.training.behavior import pipeline_for
 
     options = DataOptions(SplitSpec("blocks", block_frames=7, gap_frames=0), smooth_frames=5)
     data = prepare_data([SAMPLE], pipeline_for("simplistic", "shallow", "ours"), 2, options, workers=1)

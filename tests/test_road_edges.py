@@ -120,7 +120,7 @@ def test_ground_points_land_where_the_view_synthesis_puts_them() -> None:
 
 
 def test_rbc_data_road_writes_one_row_per_centre_frame(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from models.roadfile import ROAD_FILE, read_road_middles
+    from models.data.roadfile import ROAD_FILE, read_road_middles
     from tools.cli import main
 
     data = tmp_path / "rec"
@@ -134,7 +134,7 @@ def test_rbc_data_road_writes_one_row_per_centre_frame(tmp_path: Path, capsys: p
 
 
 def _sample_with_road(tmp_path: Path, middle_of: dict[str, float] | None = None) -> Path:
-    from models.roadfile import ROAD_FILE, write_road_file
+    from models.data.roadfile import ROAD_FILE, write_road_file
 
     data = tmp_path / "rec"
     shutil.copytree(SAMPLE, data)
@@ -145,9 +145,9 @@ def _sample_with_road(tmp_path: Path, middle_of: dict[str, float] | None = None)
 
 
 def test_the_centre_gain_adds_steering_towards_the_roads_middle_and_never_scores_it(tmp_path: Path) -> None:
-    from models.behavior import pipeline_for
-    from models.roadfile import ROAD_FILE, read_road_middles
-    from models.trainingdata import DataOptions, prepare_data
+    from models.data.roadfile import ROAD_FILE, read_road_middles
+    from models.data.trainingdata import DataOptions, prepare_data
+    from models.training.behavior import pipeline_for
 
     data = _sample_with_road(tmp_path)
     pipeline = pipeline_for("simplistic", "shallow", "ours")
@@ -161,8 +161,8 @@ def test_the_centre_gain_adds_steering_towards_the_roads_middle_and_never_scores
 
 
 def test_the_centre_gain_without_a_road_file_is_one_clear_error(tmp_path: Path) -> None:
-    from models.behavior import pipeline_for
-    from models.trainingdata import DataOptions, prepare_data
+    from models.data.trainingdata import DataOptions, prepare_data
+    from models.training.behavior import pipeline_for
     from protocol.datalog import DataLogError
 
     data = tmp_path / "rec"
@@ -182,7 +182,7 @@ def test_an_unknown_lane_rule_or_view_source_is_refused() -> None:
 
 
 def test_the_edge_pull_acts_beyond_the_margin_each_camera_at_its_own_offset() -> None:
-    from models.augment import CENTER, LEFT, RIGHT, AugmentSpec, edge_pull
+    from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, edge_pull
 
     spec = AugmentSpec(edge_gain=0.2, edge_margin_m=1.5, side_camera_m=1.0)
     middles = np.array([0.5, 0.5, 0.5, -2.0, 2.0])  # the road's middle from the centre camera, + right
@@ -196,7 +196,7 @@ def test_the_edge_pull_acts_beyond_the_margin_each_camera_at_its_own_offset() ->
 
 
 def test_the_edge_pull_moves_labels_only_where_asked_and_draws_nothing(tmp_path: Path) -> None:
-    from models.augment import AugmentSpec, draw_params
+    from models.augmentation.augment import AugmentSpec, draw_params
 
     steering, sides = np.zeros(64), np.ones(64, bool)
     middles = np.linspace(-3, 3, 64)
@@ -212,8 +212,8 @@ def test_the_edge_pull_moves_labels_only_where_asked_and_draws_nothing(tmp_path:
 
 
 def test_rbc_train_keeps_the_road_middles_for_the_edge_pull(tmp_path: Path) -> None:
-    from models.behavior import pipeline_for
-    from models.trainingdata import DataOptions, prepare_data
+    from models.data.trainingdata import DataOptions, prepare_data
+    from models.training.behavior import pipeline_for
 
     data = _sample_with_road(tmp_path)
     pipeline = pipeline_for("simplistic", "shallow", "ours")
@@ -231,7 +231,7 @@ def test_rbc_train_keeps_the_road_middles_for_the_edge_pull(tmp_path: Path) -> N
 
 
 def test_the_edge_gain_reaches_the_augmentation_and_a_bad_one_is_refused(tmp_path: Path) -> None:
-    from models.train_config import SIDE_CAMERA_OFFSET_M, TrainConfig
+    from models.training.train_config import SIDE_CAMERA_OFFSET_M, TrainConfig
 
     config = TrainConfig(data=["d"], out=str(tmp_path), edge_gain=0.2, edge_margin=2.0)
     spec = config.pipeline().augment

@@ -12,7 +12,7 @@ import pytest
 from drive_server.model import SteeringModel
 from drive_server.models_dir import bundled_model_path, bundled_models
 from drive_server.pipeline import DrivePipeline
-from models.labels import centred_average
+from models.data.labels import centred_average
 from protocol.datalog import read_log
 from protocol.jpeg import read_jpeg_file
 from tests.conftest import UDACITY_SAMPLE

@@ -20,11 +20,11 @@ from drive_server.contract import (  # noqa: E402
     PreprocessContract,
 )
 from drive_server.preprocess import preprocess, to_input_tensor  # noqa: E402
-from models import train as train_mod  # noqa: E402
-from models.checkpoint import exported_weights  # noqa: E402
-from models.framecache import build_cache, load_frame  # noqa: E402
-from models.nets import ContractInput, build_model  # noqa: E402
-from models.train import RunDirError, TrainConfig, steps_per_epoch, train  # noqa: E402
+from models.data.framecache import build_cache, load_frame  # noqa: E402
+from models.networks.checkpoint import exported_weights  # noqa: E402
+from models.networks.nets import ContractInput, build_model  # noqa: E402
+from models.training import train as train_mod  # noqa: E402
+from models.training.train import RunDirError, TrainConfig, steps_per_epoch, train  # noqa: E402
 from protocol.datalog import read_log  # noqa: E402
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"

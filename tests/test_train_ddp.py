@@ -16,8 +16,8 @@ import pytest
 torch = pytest.importorskip("torch")
 dist = pytest.importorskip("torch.distributed")
 
-from models import distributed as ddp  # noqa: E402
-from models.nets import build_model  # noqa: E402
+from models.networks.nets import build_model  # noqa: E402
+from models.training import distributed as ddp  # noqa: E402
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 BATCH = 8
@@ -74,7 +74,7 @@ def test_two_process_step_equals_the_single_process_step_on_the_global_batch(tmp
 
 
 def test_a_shard_is_every_size_th_sample_and_its_share_of_the_batch():
-    from models.batches import TrainingSet
+    from models.data.batches import TrainingSet
 
     data = TrainingSet(np.arange(10), np.zeros(10, np.float32), np.ones(10, bool), 0.0, 8)
     one = ddp.shard(data, ddp.World(1, 2, 1))

@@ -16,10 +16,10 @@ from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, Preproc
 from drive_server.model import SteeringModel  # noqa: E402
 from drive_server.pipeline import DrivePipeline  # noqa: E402
 from drive_server.preprocess import to_input_tensor  # noqa: E402
-from models import train as train_mod  # noqa: E402
-from models.framecache import build_cache, load_frame  # noqa: E402
-from models.nets import ContractInput, build_model  # noqa: E402
-from models.train import TrainConfig, train  # noqa: E402
+from models.data.framecache import build_cache, load_frame  # noqa: E402
+from models.networks.nets import ContractInput, build_model  # noqa: E402
+from models.training import train as train_mod  # noqa: E402
+from models.training.train import TrainConfig, train  # noqa: E402
 from protocol.datalog import read_log  # noqa: E402
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
@@ -129,8 +129,8 @@ def test_output_scale_multiplies_what_is_exported_and_is_recorded(tmp_path: Path
 
 def test_inspect_scores_validation_frames_only_and_says_so(tmp_path: Path, capsys) -> None:
     pytest.importorskip("matplotlib")
-    from models.metrics import steering_metrics
-    from models.trainingdata import prepare_data
+    from models.data.trainingdata import prepare_data
+    from models.training.metrics import steering_metrics
     from tools.cli import main
 
     config = _config(tmp_path / "run", epochs=1, max_steps_per_epoch=2)

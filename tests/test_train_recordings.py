@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models.balance import balanced_pass, group_cap
-from models.split import SplitSpec, make_split, recording_split
-from models.trainingdata import lagged_labels
+from models.data.balance import balanced_pass, group_cap
+from models.data.split import SplitSpec, make_split, recording_split
+from models.data.trainingdata import lagged_labels
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 
@@ -70,7 +70,7 @@ def test_lagged_labels_stay_within_their_recording() -> None:
 @pytest.mark.slow
 def test_training_with_held_out_recordings_reports_each_of_them(tmp_path: Path) -> None:
     pytest.importorskip("torch")
-    from models.train import TrainConfig, train
+    from models.training.train import TrainConfig, train
 
     logs = []
     for name in ("driver-a", "driver-b", "driver-c"):
@@ -89,8 +89,8 @@ def test_training_with_held_out_recordings_reports_each_of_them(tmp_path: Path) 
 
 
 def test_a_shorter_recovery_distance_pulls_side_frames_back_harder() -> None:
-    from models.augment import LEFT, RIGHT, perspective_label
-    from models.train_config import TrainConfig
+    from models.augmentation.augment import LEFT, RIGHT, perspective_label
+    from models.training.train_config import TrainConfig
 
     paper = TrainConfig(data=["x"], out="y").pipeline().augment.gamma
     strong = TrainConfig(data=["x"], out="y", recovery_distance=5).pipeline().augment.gamma
@@ -103,7 +103,7 @@ def test_a_shorter_recovery_distance_pulls_side_frames_back_harder() -> None:
 
 
 def test_the_turned_camera_and_reduced_decode_reach_the_pipeline() -> None:
-    from models.train_config import TrainConfig
+    from models.training.train_config import TrainConfig
 
     paper = TrainConfig(data=["x"], out="y").pipeline()
     assert paper.augment.yaw == 0.0 and paper.contract.decode_reduce == 0  # off unless asked for: the paper's

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from drive_server.preprocess import to_input_tensor
-from models import augment, geometry
-from models.augment import CAMERAS, AugmentSpec, draw_params
-from models.fastaug import FastAugmenter
-from models.framecache import FrameCache
+from models.augmentation import augment, geometry
+from models.augmentation.augment import CAMERAS, AugmentSpec, draw_params
+from models.augmentation.fastaug import FastAugmenter
+from models.data.framecache import FrameCache
 
 NONE = dict(perspective=0.0, shadow=0.0, brightness=0.0, flip=0.0, pan=0.0, tilt=0.0)
 
@@ -53,7 +53,7 @@ def test_turned_camera_is_the_closed_loops_rotation() -> None:
 def test_a_turned_view_has_no_edge_that_tells_its_turn(range_deg: float) -> None:
     """The repeated edge a turn leaves is blanked on both sides of every input (the closed loop's views have
     that edge too: a network that read the turn from it would score there what it cannot do in Unity)."""
-    from models.train_config import TrainConfig
+    from models.training.train_config import TrainConfig
 
     pipeline = TrainConfig(data=["x"], out="y", yaw_aug=1.0, yaw_range=range_deg, crop_top=64,
                            crop_bottom=136).pipeline()

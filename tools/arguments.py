@@ -9,8 +9,8 @@ from protocol import SpeedUnit
 
 def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
     """``--behavior``, ``--arch``, ``--approach``: which of the paper's training pipelines."""
-    from models.behavior import Approach, Arch, Behavior
-    from models.train_config import TrainConfig
+    from models.training.behavior import Approach, Arch, Behavior
+    from models.training.train_config import TrainConfig
 
     parser.add_argument("--behavior", choices=[b.value for b in Behavior], default=TrainConfig.behavior,
                         help="driving behavior: sets zero-steer balancing, augmentations and epochs (paper Tables 4-6)")
@@ -55,7 +55,7 @@ BONNET_CROP = (64, 136)
 def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
     """Crop (carried in the model's contract) and brightness-augmentation strength, for train and previews."""
     from drive_server.contract import DECODE_REDUCTIONS
-    from models.train_config import SCALE_BRIGHTNESS_RANGE, TrainConfig
+    from models.training.train_config import SCALE_BRIGHTNESS_RANGE, TrainConfig
 
     parser.add_argument("--crop-top", type=int, default=TrainConfig.crop_top, metavar="ROW",
                         help="first row of the 320x160 frame the network sees (default: the approach's, 0 for ours, "
@@ -117,7 +117,7 @@ def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
 
 def add_yaw_arguments(parser: argparse.ArgumentParser) -> None:
     """``--yaw-aug/--yaw-range/--yaw-gain``: the turned-camera augmentation (rbc train, rbc augment-preview)."""
-    from models.train_config import TrainConfig
+    from models.training.train_config import TrainConfig
 
     parser.add_argument("--yaw-aug", type=float, default=TrainConfig.yaw_aug, metavar="P",
                         help="share of samples seen from the car turned by psi ~ U(-R, R) degrees (an exact "

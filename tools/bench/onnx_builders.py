@@ -2,7 +2,7 @@
 
 Why: latency benchmarks and tests need real-shaped models on installs without torch, and the tests
 must not depend on binary fixtures. The graphs are built from the one layer table of
-:mod:`models.architectures` (parameter counts are asserted) and carry the preprocessing contract
+:mod:`models.networks.architectures` (parameter counts are asserted) and carry the preprocessing contract
 in their metadata like a trained export would. ``onnx`` (train extra) is imported lazily.
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PAPER_CONTRACT, PreprocessContract
-from models.architectures import ARCHITECTURES, Architecture
+from models.networks.architectures import ARCHITECTURES, Architecture
 
 OPSET = 17
 

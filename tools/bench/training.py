@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from models.behavior import pipeline_for
+from models.training.behavior import pipeline_for
 
 PAPER_TRAIN_SAMPLES = 9680
 PAPER_TOTAL_SAMPLES = 12101
@@ -42,10 +42,10 @@ class Rate:
 def benchmark(args: argparse.Namespace) -> int:
     import torch
 
-    from models.batches import Prefetcher, TrainingSet, epoch_batches
-    from models.fastaug import FastAugmenter
-    from models.nets import build_model, count_parameters
-    from models.train import default_threads, steps_per_epoch
+    from models.augmentation.fastaug import FastAugmenter
+    from models.data.batches import Prefetcher, TrainingSet, epoch_batches
+    from models.networks.nets import build_model, count_parameters
+    from models.training.train import default_threads, steps_per_epoch
 
     pipeline = pipeline_for(args.behavior, args.arch, args.approach)
     threads = args.threads or default_threads(args.arch)
@@ -162,8 +162,8 @@ def benchmark(args: argparse.Namespace) -> int:
 
 def _paper_sized_cache(args: argparse.Namespace, pipeline):
     """Frames of the given recordings (or synthetic ones) repeated to the paper's 12,101 samples."""
-    from models.framecache import FrameCache
-    from models.trainingdata import prepare_data
+    from models.data.framecache import FrameCache
+    from models.data.trainingdata import prepare_data
 
     cams = 3 if pipeline.augment.uses_side_cameras else 1
     c = pipeline.contract

@@ -1,4 +1,8 @@
-"""``rbc augment-preview``: a grid of augmented frames with their labels (library: :mod:`models.augment_preview`)."""
+"""``rbc augment-preview``: a grid of augmented frames with their labels, to see what training sees.
+
+Each sample is shown twice: the literal full-resolution augmentation (``augment_reference``, as in
+the paper's Figures 3-9) and the network input the fast training path makes from the same draws.
+"""
 
 from __future__ import annotations
 
@@ -19,8 +23,95 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from models.augment_preview import write_preview
     from tools.arguments import preprocess_options
 
-    return write_preview(args, preprocess_options(args) | {k: getattr(args, k) for k in ("yaw_aug", "yaw_range",
+    return _write_preview(args, preprocess_options(args) | {k: getattr(args, k) for k in ("yaw_aug", "yaw_range",
                                                                                            "yaw_gain")})
+
+
+def _describe(params, i: int) -> str:
+    """Short text of what was applied to sample ``i``."""
+    from protocol.facts import CAMERAS
+
+    parts = []
+    if params.camera[i]:
+        parts.append(CAMERAS[int(params.camera[i])])
+    if params.shadow[i]:
+        parts.append("shadow")
+    if params.brightness[i]:
+        parts.append(f"bright{params.beta[i]:+.2g}")
+    if params.turned[i]:
+        parts.append(f"turn{params.yaw_deg[i]:+.1f}°")
+    if params.flip[i]:
+        parts.append("flip")
+    if params.pan[i]:
+        parts.append(f"pan({params.pan_xy[i, 0]:+.0f},{params.pan_xy[i, 1]:+.0f})")
+    if params.shift[i]:
+        parts.append(f"shift{params.shift_px[i]:+.0f}")
+    if params.tilt[i]:
+        parts.append(f"tilt{params.tilt_deg[i]:+.2f}°")
+    return " ".join(parts) or "none"
+
+
+def _write_preview(args: argparse.Namespace, options: dict) -> int:
+    """``options``: the ``TrainConfig`` fields of the preview's crop, decode, brightness and turn flags."""
+    import cv2
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from drive_server.preprocess import blank_edges
+    from models.augmentation.augment import augment_reference, draw_params
+    from models.augmentation.fastaug import FastAugmenter
+    from models.data.framecache import build_cache, load_frame
+    from models.training.train_config import TrainConfig
+    from protocol.datalog import read_logs
+    from protocol.facts import CAMERAS
+
+    pipeline = TrainConfig(data=[], out="", behavior=args.behavior, arch=args.arch, approach=args.approach,
+                           **options).pipeline()
+    dataset = read_logs(args.data)
+    rng = np.random.default_rng(args.seed)
+    # prefer turning frames so the label corrections are visible, as the paper's figures do
+    samples = dataset.samples
+    steering = np.array([s.steering for s in samples], np.float32)
+    weights = np.where(steering != 0, 3.0, 1.0)
+    pick = np.sort(rng.choice(len(samples), size=min(args.n, len(samples)), replace=False, p=weights / weights.sum()))
+    chosen = [samples[i] for i in pick]
+    cams = CAMERAS if pipeline.augment.uses_side_cameras else ("center",)
+    cache = build_cache(chosen, pipeline.contract, cams)
+    sides = np.array([s.has_sides for s in chosen]) & pipeline.augment.uses_side_cameras
+    params = draw_params(steering[pick], sides, pipeline.augment, rng)
+    fast = FastAugmenter(cache, pipeline.augment).images(np.arange(len(chosen)), params)
+
+    cols = 4
+    rows = int(np.ceil(len(chosen) / cols))
+    fig, axes = plt.subplots(rows, cols * 2, figsize=(cols * 2 * 2.6, rows * 1.75), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for k, s in enumerate(chosen):
+        frames = {c: load_frame(getattr(s, c)) for c in cams if getattr(s, c) is not None}
+        full, label = augment_reference(frames, params, k, pipeline.augment)
+        net = blank_edges(fast[k][None].copy(), pipeline.contract.blank_columns)[0]  # as the network sees it
+        if pipeline.contract.color == "yuv":
+            net = cv2.cvtColor(net, cv2.COLOR_YUV2RGB)
+        r, c = divmod(k, cols)
+        a_full, a_net = axes[r, 2 * c], axes[r, 2 * c + 1]
+        a_full.imshow(full)
+        a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{_describe(params, k)}", fontsize=6.5)
+        a_net.imshow(net, interpolation="nearest")
+        a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=6.5)
+    a, c = pipeline.augment, pipeline.contract
+    bright = f"p + U(-{a.brightness_range:g}, {a.brightness_range:g})" if a.brightness_mode == "add" else \
+        f"p x (1 + U(-{a.brightness_range:g}, {a.brightness_range:g}))"
+    fig.suptitle(f"{args.behavior} / {args.approach}: recorded label -> training label "
+                 f"(left: full-resolution reference, right: training input, rows {c.crop_top}-{c.crop_bottom}); "
+                 f"brightness {bright}", fontsize=9)
+    fig.tight_layout()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=110)
+    plt.close(fig)
+    print(f"wrote {args.out} ({len(chosen)} samples from {', '.join(str(p) for p in dataset.logs)})")
+    return 0

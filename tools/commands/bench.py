@@ -18,7 +18,7 @@ log = logging.getLogger("rbc.bench")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--server", default=None, help="benchmark a running server at this URL instead of starting one")
     p.add_argument("--model", type=Path, default=None, help="ONNX model (default: build --arch with random weights)")
-    from models.architectures import ARCHITECTURES  # the layer tables only: no torch, no onnx
+    from models.networks.architectures import ARCHITECTURES  # the layer tables only: no torch, no onnx
 
     p.add_argument("--arch", choices=(*ARCHITECTURES, "both"), default="shallow",
                    help="architecture to build when no --model is given; both: shallow and pilotnet (default shallow)")

@@ -163,7 +163,7 @@ def _crossval(args: argparse.Namespace) -> int:
 
 
 def _road(args: argparse.Namespace) -> int:
-    from models.roadfile import ROAD_FILE, write_road_file
+    from models.data.roadfile import ROAD_FILE, write_road_file
     from protocol.datalog import read_log
     from tools.console import Progress
     from tools.drivelog.path import recorded_drive

@@ -1,5 +1,5 @@
-"""``rbc ensemble``: several ONNX steering models averaged into one file (:mod:`models.ensemble_onnx`), e.g. the
-same recipe trained from different seeds; drive_server serves it like any model."""
+"""``rbc ensemble``: several ONNX steering models averaged into one file, e.g. the same recipe trained from
+different seeds; drive_server serves it like any model (:mod:`models.onnxfiles.ensemble_onnx`)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from drive_server.smoothing import check_alpha
-    from models.ensemble_onnx import EnsembleError, ensemble_onnx
+    from models.onnxfiles.ensemble_onnx import EnsembleError, ensemble_onnx
 
     if args.out.suffix != ".onnx":
         raise CommandError(f"--out {args.out}: give a path ending in .onnx")

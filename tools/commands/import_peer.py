@@ -2,7 +2,7 @@
 
 The result carries its preprocessing contract (RGB in; the YUV conversion is inside the graph), so
 ``drive_server --model`` and ``rbc score --model`` serve it like a model of ours (library:
-:mod:`models.peer_keras`).
+:mod:`models.onnxfiles.peer_keras`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from models.peer_keras import PeerImportError, import_peer
+    from models.onnxfiles.peer_keras import PeerImportError, import_peer
 
     if args.out.suffix != ".onnx":
         raise CommandError(f"--out {args.out}: give a path ending in .onnx")

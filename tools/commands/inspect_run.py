@@ -1,4 +1,4 @@
-"""``rbc inspect``: analysis pictures of a training run (library: :mod:`models.inspection`).
+"""``rbc inspect``: analysis pictures of a training run (library: :mod:`models.training.inspection`).
 
 Named ``inspect_run`` rather than after the subcommand so that it never shadows the standard library."""
 
@@ -8,8 +8,8 @@ import argparse
 import json
 from pathlib import Path
 
-from models import runfiles
-from models.inspection import LAP_FRAMES, plot_activations, plot_histograms, plot_loss, plot_predictions
+from models.training import runfiles
+from models.training.inspection import LAP_FRAMES, plot_activations, plot_histograms, plot_loss, plot_predictions
 from tools.errors import CommandError
 
 
@@ -25,11 +25,11 @@ def run(args: argparse.Namespace) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
-    from models.checkpoint import exported_weights
-    from models.metrics import format_metrics
-    from models.nets import build_model
-    from models.train import TrainConfig
-    from models.trainingdata import prepare_data
+    from models.data.trainingdata import prepare_data
+    from models.networks.checkpoint import exported_weights
+    from models.networks.nets import build_model
+    from models.training.metrics import format_metrics
+    from models.training.train import TrainConfig
 
     run_dir: Path = args.run_dir
     if not (run_dir / runfiles.CONFIG).is_file():

@@ -1,5 +1,5 @@
-"""``rbc mirror``: an existing ONNX model mirror-averaged, (f(x) - f(mirror x)) / 2 (:mod:`models.mirror_onnx`):
-for models whose training run is gone; ``rbc train --mirror-average`` does the same at export."""
+"""``rbc mirror``: an existing ONNX model mirror-averaged, (f(x) - f(mirror x)) / 2, for models whose training run
+is gone (:mod:`models.onnxfiles.mirror_onnx`); ``rbc train --mirror-average`` does the same at export."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from drive_server.smoothing import check_alpha
-    from models.mirror_onnx import MirrorError, mirror_average_onnx
+    from models.onnxfiles.mirror_onnx import MirrorError, mirror_average_onnx
 
     if args.out.suffix != ".onnx":
         raise CommandError(f"--out {args.out}: give a path ending in .onnx")

@@ -1,7 +1,7 @@
 """``rbc model-card``: write the model card of a bundled model from its training run and a closed-loop check.
 
 Used when (re)building ``models/pretrained``: ``rbc model-card RUN_DIR --behavior B --recipe "..."
---sim-json SIM_RESULT.json --out models/pretrained/B.md`` (library: :mod:`models.model_card`).
+--sim-json SIM_RESULT.json --out models/pretrained/B.md`` (library: :mod:`models.onnxfiles.model_card`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from drive_server.runrecords import write_text
-from models.model_card import card
+from models.onnxfiles.model_card import card
 from protocol.facts import BEHAVIORS
 
 

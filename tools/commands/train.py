@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from models.train_config import TrainConfig
+from models.training.train_config import TrainConfig
 from tools.arguments import add_pipeline_arguments, add_preprocess_arguments, add_yaw_arguments, parse_speed
 from tools.errors import CommandError
 
@@ -93,8 +93,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from models.metrics import format_metrics
-    from models.train import train
+    from models.training.metrics import format_metrics
+    from models.training.train import train
     from tools.arguments import preprocess_options
 
     if not args.data and not args.resume:

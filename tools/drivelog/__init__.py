@@ -10,7 +10,7 @@ Owns: the real simulator's camera model and its calibration from the side camera
 ``calibrate``), the recorded path (``path``), the road's edges (``road``), the loop and its drivers
 (``loop``), and its pictures (``pictures``). May import ``protocol``, ``drive_server`` (the serving
 pipeline, so the model sees exactly what the server would give it), ``tools.realdata`` (frame time stamps),
-``tools.sim.driving.rules`` (the degree of autonomy) and ``models.labels`` (numpy only); never torch.
+``tools.sim.driving.rules`` (the degree of autonomy) and ``models.data.labels`` (numpy only); never torch.
 
 Why not MIT's VISTA (``vista`` 2.0.6 on PyPI, the field's data-driven simulator): its sdist declares no
 dependencies but imports pyrender (OpenGL, so EGL or OSMesa on a headless machine) and ffio (an ffmpeg

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.labels import centred_average
+from models.data.labels import centred_average
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
 from tools.drivelog.path import RecordedDrive, curvature

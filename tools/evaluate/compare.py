@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.runrecords import file_sha256
-from models.runfiles import CONFIG, HISTORY, read_history
+from models.training.runfiles import CONFIG, HISTORY, read_history
 from tools.errors import CommandError
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
 from tools.evaluate.paper import PAPER_TABLE10, PAPER_TABLE10_RANGES

@@ -18,8 +18,8 @@ import numpy as np
 from drive_server.model import SteeringModel
 from drive_server.pipeline import DriveConfig, DrivePipeline
 from drive_server.smoothing import OFF
-from models.labels import centred_average
-from models.metrics import steering_metrics
+from models.data.labels import centred_average
+from models.training.metrics import steering_metrics
 from protocol.datalog import Sample, read_log
 from protocol.jpeg import read_jpeg_file
 

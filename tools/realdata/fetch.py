@@ -1,10 +1,11 @@
 """Fetching a public recording from its git repository, frames and log only (``rbc data fetch``).
 
 A recording's repository often holds models, videos and other recordings too, so it is cloned without
-blobs (``--filter=blob:none``) and only ``FOLDER/driving_log.csv`` and ``FOLDER/IMG/`` are checked out at
-the manifest's commit (sparse checkout: the blobs come in one batch). The result is ``OUT/NAME/`` with
-``driving_log.csv`` (only the manifest's rows) and ``IMG/``; the marker file, written last, says the copy
-is complete, so an interrupted fetch is redone and a complete one is skipped.
+blobs (``--filter=blob:none``) and only ``FOLDER/LOG`` (the manifest's ``log``, ``driving_log.csv`` unless
+it names another) and ``FOLDER/IMG/`` are checked out at the manifest's commit (sparse checkout: the blobs
+come in one batch). The result is ``OUT/NAME/`` with ``driving_log.csv`` (that log, only the manifest's
+rows) and ``IMG/``; the marker file, written last, says the copy is complete, so an interrupted fetch is
+redone and a complete one is skipped.
 """
 
 from __future__ import annotations
@@ -37,8 +38,9 @@ class Fetched:
         if self.skipped:
             return f"{self.name}: already complete in {self.folder}, skipped"
         rows = f" (rows {rec.rows})" if rec.rows else ""
+        log = rec.log if rec.log != LOG_NAME else ""
         return (f"{self.name}: {self.rows} rows{rows}, {self.frames} frames from {base_url.rstrip('/')}/"
-                f"{rec.repository} at {rec.commit[:10]} /{rec.folder} -> {self.folder}")
+                f"{rec.repository} at {rec.commit[:10]} /{rec.folder}{log} -> {self.folder}")
 
 
 class _GitFailed(Exception):
@@ -110,5 +112,5 @@ def fetch(rec: PublicRecording, out: Path, base_url: str = DEFAULT_BASE_URL) -> 
     rows = (keep_rows(dest / LOG_NAME, rec.rows) if rec.rows
             else sum(1 for _, row, _ in numbered_lines(read_lines(dest / LOG_NAME)) if row > 0))
     frames = sum(1 for p in (dest / IMAGE_DIR).iterdir() if p.is_file())
-    (dest / MARKER).write_text(f"{rec.repository} {rec.commit} /{rec.folder}\n", encoding="utf-8")
+    (dest / MARKER).write_text(f"{rec.repository} {rec.commit} /{rec.paths()[0]}\n", encoding="utf-8")
     return Fetched(rec.name, dest, rows, frames)

@@ -1,8 +1,10 @@
 """The public Udacity-simulator recordings this project trains and scores on, as data.
 
 ``public_recordings.csv`` names each recording once: the GitHub repository and commit that hold it, the
-folder with ``driving_log.csv`` and ``IMG/`` in it, the rows that belong to it (one log may hold two
-tracks) and how its driver steered. The images are never committed here; ``rbc data fetch`` gets them.
+folder with the log and ``IMG/`` in it, the rows that belong to it (one log may hold two tracks, or
+Udacity's sample beside the owner's rows), how its driver steered, its cross-validation fold and, where
+it is not ``driving_log.csv``, the log's file name. The images are never committed here; ``rbc data
+fetch`` gets them (and writes the log as ``driving_log.csv`` whatever its name in the repository).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
+from protocol.datalog_writer import LOG_NAME
 from tools.realdata.rows import RowRange, parse_rows
 
 MANIFEST = "public_recordings.csv"
@@ -29,13 +32,14 @@ class PublicRecording:
     folder: str  # inside the repository, "" for its root, else ending in "/"
     rows: RowRange | None  # 1-based rows of the log that are this recording; None: all
     input: str  # keyboard or mouse
-    # cross-validation fold (A-D): a driver's recordings share one, and every fold holds lake, jungle and
-    # (but for one) mountain recordings, so each is held out once from a model trained on all the others
+    # cross-validation fold (A-D): a driver's recordings share one, and every fold holds lake, several jungle
+    # and one or more mountain recordings, so each is held out once from a model trained on all the others
     fold: str = ""
+    log: str = LOG_NAME  # the log's file name in ``folder`` (the manifest's optional ``log`` column)
 
     def paths(self) -> tuple[str, str]:
         """The log and the image folder inside the repository."""
-        return f"{self.folder}driving_log.csv", f"{self.folder}IMG"
+        return f"{self.folder}{self.log}", f"{self.folder}IMG"
 
 
 def _parse(row: dict[str, str], line: int) -> PublicRecording:
@@ -43,8 +47,10 @@ def _parse(row: dict[str, str], line: int) -> PublicRecording:
     rec = PublicRecording(name=row["name"].strip(), track=row["track"].strip(),
                           repository=row["repository"].strip(), commit=row["commit"].strip(),
                           folder=f"{folder}/" if folder else "", rows=parse_rows(row["rows"] or ""),
-                          input=row["input"].strip(), fold=(row.get("fold") or "").strip())
-    if rec.track not in TRACKS or rec.input not in INPUTS or len(rec.commit) != 40 or rec.repository.count("/") != 1:
+                          input=row["input"].strip(), fold=(row.get("fold") or "").strip(),
+                          log=(row.get("log") or "").strip() or LOG_NAME)
+    if (rec.track not in TRACKS or rec.input not in INPUTS or len(rec.commit) != 40 or rec.repository.count("/") != 1
+            or not rec.log.endswith(".csv") or any(c in rec.log for c in "/\\")):
         raise ValueError(f"{MANIFEST}:{line}: bad entry {rec}")
     return rec
 

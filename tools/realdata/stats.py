@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from models.labels import centred_average
-from models.metrics import pearson_r
+from models.data.labels import centred_average
+from models.training.metrics import pearson_r
 from protocol.datalog import find_log, read_log
 from tools.realdata.sharpness import sharpness_values
 from tools.realdata.stamps import frame_intervals, frame_time, session_ids

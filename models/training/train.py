@@ -25,17 +25,17 @@ import torch
 from torch import nn
 
 from drive_server import runrecords
-from models import distributed as ddp
-from models import runfiles
-from models.batches import Prefetcher, TrainingSet, epoch_batches
-from models.behavior import Pipeline
-from models.checkpoint import RunDirError, State, load_checkpoint, save_checkpoint
-from models.fastaug import FastAugmenter
-from models.nets import build_model, count_parameters
-from models.run_export import TrainResult, finish, predict
-from models.train_config import TrainConfig
-from models.train_record import config_record
-from models.trainingdata import PreparedData, prepare_data
+from models.augmentation.fastaug import FastAugmenter
+from models.data.batches import Prefetcher, TrainingSet, epoch_batches
+from models.data.trainingdata import PreparedData, prepare_data
+from models.networks.checkpoint import RunDirError, State, load_checkpoint, save_checkpoint
+from models.networks.nets import build_model, count_parameters
+from models.training import distributed as ddp
+from models.training import runfiles
+from models.training.behavior import Pipeline
+from models.training.run_export import TrainResult, finish, predict
+from models.training.train_config import TrainConfig
+from models.training.train_record import config_record
 
 log = logging.getLogger(__name__)
 

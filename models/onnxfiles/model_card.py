@@ -5,12 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from models.architectures import ARCHITECTURES as TABLES
-from models.runfiles import CONFIG, HISTORY, read_history
+from models.networks.architectures import ARCHITECTURES as TABLES
+from models.training.runfiles import CONFIG, HISTORY, read_history
 
 _NAMES = {"shallow": "The paper's shallow CNN", "pilotnet": "NVIDIA's PilotNet",
           "shallow-wide": "The shallow CNN, twice the width and filters"}
-#: Each network's card line; sizes from its layer table (models.architectures), said there once.
+#: Each network's card line; sizes from its layer table (models.networks.architectures), said there once.
 ARCHITECTURES = {n: f"{_NAMES[n]} ({a.params:,} parameters, {a.width}x{a.height} input)" for n, a in TABLES.items()}
 
 

@@ -9,9 +9,9 @@ from typing import Any
 import torch
 
 from drive_server import runrecords
-from models.behavior import Pipeline
-from models.train_config import TrainConfig
-from models.trainingdata import PreparedData
+from models.data.trainingdata import PreparedData
+from models.training.behavior import Pipeline
+from models.training.train_config import TrainConfig
 
 
 def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, epochs: int,

@@ -22,8 +22,8 @@ from drive_server import runrecords
 from drive_server.contract import METADATA_KEY, PreprocessContract
 from drive_server.preprocess import to_input_tensor
 from drive_server.smoothing import OFF
-from models.nets import ContractInput
-from models.onnx_metadata import set_model_metadata
+from models.networks.nets import ContractInput
+from models.onnxfiles.onnx_metadata import set_model_metadata
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import torch
 from torch import nn
 
-from models.batches import TrainingSet
+from models.data.batches import TrainingSet
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """Mirror-average an existing ONNX steering model: the file answers (f(x) - f(mirror x)) / 2.
 
-``rbc train --mirror-average`` does this at export (``models.nets.MirrorAveraged``); this module does it to
+``rbc train --mirror-average`` does this at export (``models.networks.nets.MirrorAveraged``); this module does it to
 a model file whose training run is gone (the bundled generalists, a model trained elsewhere), at the ONNX
 graph level: the input and its mirror image go through the unchanged network as one batch of 2N, and the
 two halves' difference, halved, is the output. The original network's left-right lean cancels, and so
@@ -21,8 +21,8 @@ from onnx import helper, numpy_helper
 from drive_server import runrecords
 from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.smoothing import OFF
-from models.behavior import check_output_scale, keeps_lane
-from models.onnx_metadata import read_steering_graph, set_model_metadata
+from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
+from models.training.behavior import check_output_scale, keeps_lane
 
 TOLERANCE = 1e-4
 _PREFIX = "rbc_mirror_"

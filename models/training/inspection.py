@@ -21,8 +21,8 @@ LAP_FRAMES = 1200  # about one lap of the lake track at the simulator's recordin
 def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
     import matplotlib.pyplot as plt
 
-    from models.augment import draw_params
-    from models.balance import balanced_pass
+    from models.augmentation.augment import draw_params
+    from models.data.balance import balanced_pass
 
     rng = np.random.default_rng(seed)
     steering = data.steering[data.train]
@@ -73,7 +73,7 @@ def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: 
     import torch
 
     from drive_server.preprocess import to_input_tensor
-    from models.metrics import steering_metrics
+    from models.training.metrics import steering_metrics
 
     first_log = data.dataset.samples[0].log
     positions = [i for i in data.usable if data.dataset.samples[i].log == first_log][:frames]
@@ -88,7 +88,7 @@ def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: 
         pred = np.concatenate([session.run(None, {name: x[i:i + 256]})[0] for i in range(0, len(x), 256)]).ravel()
         source = "model.onnx (ONNX Runtime)"
     else:
-        from models.fastaug import training_contract
+        from models.augmentation.fastaug import training_contract
 
         x = to_input_tensor(images, training_contract(pipeline.contract))
         with torch.no_grad():
@@ -151,8 +151,8 @@ def plot_activations(out: Path, data, pipeline, model, count: int, seed: int) ->
     import torch
 
     from drive_server.preprocess import to_input_tensor
-    from models.fastaug import training_contract
-    from models.nets import conv_activations
+    from models.augmentation.fastaug import training_contract
+    from models.networks.nets import conv_activations
 
     rng = np.random.default_rng(seed)
     pool = data.train[data.steering[data.train] != 0] if (data.steering[data.train] != 0).any() else data.train

@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from drive_server import runrecords
-from models import runfiles
+from models.training import runfiles
 
 
 class RunDirError(RuntimeError):

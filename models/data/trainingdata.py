@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from models.behavior import Pipeline
-from models.framecache import FrameCache, build_cache
-from models.labels import centred_average
-from models.split import SplitKind, SplitSpec, make_split
+from models.data.framecache import FrameCache, build_cache
+from models.data.labels import centred_average
+from models.data.split import SplitKind, SplitSpec, make_split
+from models.training.behavior import Pipeline
 from protocol.datalog import DataLogError, DataSet, read_logs
 from protocol.units import SpeedUnit, to_kmh
 
@@ -149,7 +149,7 @@ def road_middles(dataset: DataSet, missing_ok: bool = False) -> np.ndarray:
     ``missing_ok``: a log without a road file gives NaN (the edge pull leaves it alone: a two-lane road's
     driver keeps to one lane, not the middle, so only some recordings should be pulled); else an error.
     """
-    from models.roadfile import ROAD_FILE, read_road_middles, road_file_for
+    from models.data.roadfile import ROAD_FILE, read_road_middles, road_file_for
 
     out = np.zeros(len(dataset.samples), np.float32)
     middles: dict[Path, dict[str, float] | None] = {}

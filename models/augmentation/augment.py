@@ -3,7 +3,7 @@
 Order (footnote 4: it matters): perspective shift, shadows, brightness, flip, pan, tilt, each applied
 with its own probability (Table 5). The random parameters of a whole batch are drawn at once
 (``draw_params``) so the literal full-resolution reference here (``augment_reference``) and the fast
-batched path (``models.fastaug``) can be fed the very same draws and compared. ``shift`` is not in the
+batched path (``models.augmentation.fastaug``) can be fed the very same draws and compared. ``shift`` is not in the
 paper: it is the horizontal viewpoint shift of the "nvidia" approach (off for the paper's behaviors).
 """
 
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from models import geometry
+from models.augmentation import geometry
 from protocol.facts import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG
 
 CENTER, LEFT, RIGHT = 0, 1, 2

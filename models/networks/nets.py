@@ -1,5 +1,5 @@
 """The paper's shallow CNN (14,065 parameters) and NVIDIA's PilotNet (252,219), in PyTorch, built from
-the layer table of :mod:`models.architectures`.
+the layer table of :mod:`models.networks.architectures`.
 
 Both take NCHW float32 input, the layout CPU convolutions are fastest with; ``ContractInput`` wraps
 a network so the exported ONNX model takes exactly the layout its preprocessing contract states
@@ -11,8 +11,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from models.architectures import ARCHITECTURES, PILOTNET, SHALLOW, Architecture
-from models.behavior import Arch
+from models.networks.architectures import ARCHITECTURES, PILOTNET, SHALLOW, Architecture
+from models.training.behavior import Arch
 
 
 def _init_glorot(module: nn.Module) -> None:
@@ -25,7 +25,7 @@ def _init_glorot(module: nn.Module) -> None:
 
 
 class TableNet(nn.Module):
-    """A network built from a layer table of :mod:`models.architectures` (``features`` then ``head``).
+    """A network built from a layer table of :mod:`models.networks.architectures` (``features`` then ``head``).
 
     The submodule order (conv, ReLU, ...; flatten, linear, ReLU[, dropout], ..., linear) is what the
     checkpoints' state-dict keys and :func:`conv_activations` rely on.

@@ -4,8 +4,8 @@ Every map here is a *pullback* in continuous corner coordinates: a 3x3 matrix ta
 output image to the point of the input image it samples (pixel ``i`` spans ``[i, i + 1)``). In these
 coordinates OpenCV's resize is a pure scale, a crop a pure offset, so the paper's "transform, crop the
 null area, resize back" chain and the final resize to the network's input compose into ONE matrix
-(``models.fastaug`` warps the cached network-size frame with it, once). ``models.augment`` performs
-the same chain literally, step by step at full resolution, as the reference.
+(``models.augmentation.fastaug`` warps the cached network-size frame with it, once).
+``models.augmentation.augment`` performs the same chain literally, step by step at full resolution, as the reference.
 """
 
 from __future__ import annotations

@@ -288,7 +288,7 @@ def verification_frames(data: Path | None, count: int = 8) -> np.ndarray:
 
 def import_peer(h5: Path, out: Path, yuv: str = "opencv31", data: Path | None = None) -> tuple[dict, float]:
     """Write ``out`` (ONNX, contract in its metadata); return its model info and the export's max |ORT - torch|."""
-    from models.export import export_onnx
+    from models.onnxfiles.export import export_onnx
 
     weights = read_peer_h5(h5)
     info = model_info(weights, h5, yuv)

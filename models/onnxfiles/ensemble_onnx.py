@@ -20,7 +20,7 @@ from onnx import compose, helper
 from drive_server import runrecords
 from drive_server.contract import PreprocessContract
 from drive_server.smoothing import SERVING_KEY, serving_alpha
-from models.onnx_metadata import read_steering_graph, set_model_metadata
+from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 
 TOLERANCE = 1e-4
 

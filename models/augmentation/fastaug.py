@@ -6,7 +6,7 @@ sample never touches a 320x160 image. Why that is equivalent to the literal full
 
 * Perspective shift picks another cached camera frame: exact.
 * Flip, pan, tilt (and the nvidia shift) are affine maps. "Transform, crop the null area, resize back"
-  and the final resize to the network size compose into ONE affine map (``models.geometry``), applied
+  and the final resize to the network size compose into ONE affine map (``models.augmentation.geometry``), applied
   to the cached frame with a single ``cv2.warpAffine``; the matrices of a batch are built at once. A
   flip alone is an exact mirror of the cached frame (the area resize is symmetric). What differs is
   interpolation only: the reference interpolates at full resolution and then box-filters, the warp
@@ -34,9 +34,9 @@ import numpy as np
 
 from drive_server.contract import PreprocessContract
 from drive_server.preprocess import to_input_tensor
-from models import geometry
-from models.augment import CENTER, LEFT, RIGHT, AugmentSpec, AugParams, draw_params
-from models.framecache import FrameCache
+from models.augmentation import geometry
+from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, AugParams, draw_params
+from models.data.framecache import FrameCache
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
 _SUBPIXEL_BITS = 4

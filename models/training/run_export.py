@@ -14,15 +14,15 @@ from torch import nn
 
 from drive_server import runrecords
 from drive_server.preprocess import to_input_tensor
-from models import runfiles
-from models.behavior import Pipeline
-from models.checkpoint import State
-from models.export import export_onnx
-from models.fastaug import training_contract
-from models.metrics import metrics_by_group, steering_metrics
-from models.nets import MirrorAveraged, OutputScaled, count_parameters
-from models.train_config import TrainConfig
-from models.trainingdata import PreparedData
+from models.augmentation.fastaug import training_contract
+from models.data.trainingdata import PreparedData
+from models.networks.checkpoint import State
+from models.networks.nets import MirrorAveraged, OutputScaled, count_parameters
+from models.onnxfiles.export import export_onnx
+from models.training import runfiles
+from models.training.behavior import Pipeline
+from models.training.metrics import metrics_by_group, steering_metrics
+from models.training.train_config import TrainConfig
 from protocol.rigfile import data_rig
 
 EXPORT_FRAMES = 32

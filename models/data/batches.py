@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.balance import index_batches
-from models.fastaug import FastAugmenter, augment_batch
+from models.augmentation.fastaug import FastAugmenter, augment_batch
+from models.data.balance import index_batches
 
 _INDEX_STREAM, _AUGMENT = 0, 1
 

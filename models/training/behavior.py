@@ -6,8 +6,8 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
-from models.architectures import ARCHITECTURES
-from models.augment import AugmentSpec
+from models.augmentation.augment import AugmentSpec
+from models.networks.architectures import ARCHITECTURES
 from protocol.facts import BEHAVIORS
 
 #: The paper's behaviors; the names are protocol.facts.BEHAVIORS (defined there once).
@@ -22,7 +22,7 @@ class Approach(StrEnum):
 class Arch(StrEnum):
     SHALLOW = "shallow"
     PILOTNET = "pilotnet"
-    SHALLOW_WIDE = "shallow-wide"  # not in the paper: models.architectures.SHALLOW_WIDE
+    SHALLOW_WIDE = "shallow-wide"  # not in the paper: models.networks.architectures.SHALLOW_WIDE
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,11 @@ from typing import Any
 import numpy as np
 
 from drive_server.contract import ContractError, PreprocessContract
-from models import geometry
-from models.augment import AugmentSpec
-from models.behavior import (
+from models.augmentation import geometry
+from models.augmentation.augment import AugmentSpec
+from models.data.split import SplitSpec
+from models.data.trainingdata import DataOptions
+from models.training.behavior import (
     AUGMENTATION_LOOPS,
     BATCH_SIZE,
     LEARNING_RATE,
@@ -20,8 +22,6 @@ from models.behavior import (
     keeps_lane,
     pipeline_for,
 )
-from models.split import SplitSpec
-from models.trainingdata import DataOptions
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
 #: Lateral offset of the side cameras from the centre one, metres (the design card; Eq. 4/5's numerator).
@@ -100,9 +100,9 @@ class TrainConfig:
     yaw_aug: float = 0.0
     yaw_range: float = 6.0
     yaw_gain: float = 1.0
-    # not in the paper: export (f(x) - f(mirror x)) / 2 (models.nets.MirrorAveraged); training is unchanged
+    # not in the paper: export (f(x) - f(mirror x)) / 2 (models.networks.nets.MirrorAveraged); training is unchanged
     mirror_average: bool = False
-    # not in the paper: the exported model's steering times this (models.nets.OutputScaled; 1: as trained);
+    # not in the paper: the exported model's steering times this (models.networks.nets.OutputScaled; 1: as trained);
     # training is unchanged
     output_scale: float = 1.0
     # how drive_server smooths each client's steering unless told otherwise (drive_server.smoothing; 1: off),

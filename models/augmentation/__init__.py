@@ -1,0 +1,1 @@
+"""The paper's augmentations and the turned camera: the literal reference and the one-warp fast path."""

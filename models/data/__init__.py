@@ -1,0 +1,1 @@
+"""Training data: reading logs into samples, labels, balancing, the split, the frame cache and batches."""

@@ -1,0 +1,1 @@
+"""A training run: its configuration and recipe, the loop, distributed training, metrics, its files and record."""
