@@ -21,7 +21,7 @@ from tests.conftest import UDACITY_SAMPLE
 from tools.cli import main
 from tools.realdata import recordings
 from tools.realdata.recordings import PublicRecording, public_recordings, select
-from tools.realdata.rows import RowRange, parse_rows
+from tools.realdata.rows import RowRange, keep_rows, parse_rows, row_numbers
 from tools.realdata.stamps import frame_time, session_ids
 from tools.realdata.stats import INTENT_FRAMES, intent_r, steering_input
 
@@ -84,12 +84,22 @@ def test_the_input_rule():
 
 def test_the_manifest_loads_as_data_and_ships_with_the_package():
     recs = public_recordings()
-    assert len(recs) == 29 and len({r.name for r in recs}) == 29
+    assert len(recs) == 39 and len({r.name for r in recs}) == 39
     assert all(isinstance(r, PublicRecording) and r.track in ("lake", "jungle", "mountain") for r in recs)
+    assert [len(select(recs, t)) for t in ("lake", "jungle", "mountain")] == [22, 13, 4]
     split = {r.name: r for r in recs if r.repository == "Ahmedyamani/Track"}
     assert split["Ahmedyamani-lake"].rows == RowRange(1, 2297) and split["Ahmedyamani-mountain"].rows.first == 2298
-    assert [r.name for r in select(recs, "jungle") if r.input == "mouse"] == ["TimeToBuzz"]
+    assert [r.name for r in select(recs, "jungle") if r.input == "mouse"] == ["TimeToBuzz", "gsyrrakos", "dingchen",
+                                                                             "kadway"]
     assert select(recs, names=["808brick"])[0].paths() == ("data/driving_log.csv", "data/IMG")
+    # two logs are not named driving_log.csv; two hold Udacity's sample beside the owner's rows
+    named = {r.name: r for r in select(recs, names=["kumarSuraj", "kadway", "dingchen"])}
+    assert named["kumarSuraj"].paths() == ("driving_log_hard.csv", "IMG") and named["kumarSuraj"].rows is None
+    assert named["kadway"].paths() == ("train_data/driving_log_2tracks.csv", "train_data/IMG")
+    assert named["kadway"].rows == RowRange(1, 4539)
+    assert named["dingchen"].paths() == ("data/driving_log.csv", "data/IMG")
+    assert named["dingchen"].rows == RowRange(8035, 13053)  # 3,574 + 1,445 rows of 2020_05_23 and _26
+    assert sum(r.log != "driving_log.csv" for r in recs) == 2
     with pytest.raises(ValueError, match="unknown recording"):
         select(recs, names=["nope"])
     data = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
@@ -98,6 +108,33 @@ def test_the_manifest_loads_as_data_and_ships_with_the_package():
     assert parse_rows("") is None and parse_rows("3-7") == RowRange(3, 7)
     with pytest.raises(ValueError):
         parse_rows("7-3")
+
+
+def test_the_manifest_log_column_is_optional_and_a_file_name():
+    row = {"name": "x", "track": "jungle", "repository": "o/r", "commit": "a" * 40, "folder": "d/", "rows": "",
+           "input": "keyboard", "fold": "A"}
+    assert recordings._parse(row, 2).paths() == ("d/driving_log.csv", "d/IMG")  # no log column at all
+    assert recordings._parse({**row, "log": " "}, 2).log == "driving_log.csv"
+    assert recordings._parse({**row, "log": "driving_log_hard.csv"}, 2).paths() == ("d/driving_log_hard.csv", "d/IMG")
+    for bad in ("sub/driving_log.csv", r"sub\driving_log.csv", "driving_log.txt"):
+        with pytest.raises(ValueError, match="bad entry"):
+            recordings._parse({**row, "log": bad}, 2)
+
+
+def test_a_header_naming_the_columns_out_of_order_is_read_in_the_simulators_order(tmp_path):
+    """Ragurajan21's log: header ``...,steering,speed,throttle,brake`` over steering, throttle, brake, speed."""
+    samples, _ = read_log(UDACITY_SAMPLE)
+    (tmp_path / "IMG").mkdir()
+    lines = ["center,left,right,steering,speed,throttle,brake"]
+    for s in samples[:3]:
+        shutil.copy(s.center, tmp_path / "IMG" / s.center.name)
+        lines.append(f"IMG/{s.center.name},,,{s.steering},{s.throttle},{s.brake},{s.speed}")
+    (tmp_path / "driving_log.csv").write_text("\n".join(lines) + "\n")
+    read, report = read_log(tmp_path)
+    assert report.rows == 3 and not report.skipped
+    assert [(r.steering, r.throttle, r.brake, r.speed) for r in read] == [(s.steering, s.throttle, s.brake, s.speed)
+                                                                          for s in samples[:3]]
+    assert read[0].speed == pytest.approx(30.19044)  # mph, not the throttle's 0-1
 
 
 # --------------------------------------------------------------------------- stats
@@ -220,13 +257,30 @@ def _git(*args: str, cwd: Path) -> str:
                           capture_output=True, text=True).stdout.strip()
 
 
+SAMPLE_ROWS = 36  # rows of the sample's driving_log.csv
+
+
+def _sample_lines() -> list[str]:
+    return (UDACITY_SAMPLE / "driving_log.csv").read_text(encoding="utf-8").splitlines()
+
+
 @pytest.fixture
 def local_repos(tmp_path, monkeypatch) -> tuple[str, Path]:
     """BASE/owner/repo: a commit with data/driving_log.csv and data/IMG/, then one deleting them; the manifest
-    is swapped for entries pointing there (one whole, one rows 5-14, one whose repository does not exist)."""
+    is swapped for entries pointing there (one whole, one rows 5-14, one whose repository does not exist).
+    The commit also holds two logs as some public recordings have them: other/driving_log_hard.csv (the
+    log of that folder; its driving_log.csv is another set of rows) and cr/driving_log.csv (a header row,
+    CR-only line ends, rows 1-10 another driver's, 11-36 the recording's)."""
     repo = tmp_path / "base" / "owner" / "repo"
     shutil.copytree(UDACITY_SAMPLE, repo / "data", ignore=shutil.ignore_patterns("README.md"))
     (repo / "model.h5").write_bytes(b"\0" * 100_000)  # what a recording's repository also holds
+    lines = _sample_lines()
+    shutil.copytree(UDACITY_SAMPLE / "IMG", repo / "other" / "IMG")
+    (repo / "other" / "driving_log_hard.csv").write_text("\n".join(lines[:20]) + "\n", encoding="utf-8")
+    (repo / "other" / "driving_log.csv").write_text("\n".join(lines[20:]) + "\n", encoding="utf-8")
+    shutil.copytree(UDACITY_SAMPLE / "IMG", repo / "cr" / "IMG")
+    (repo / "cr" / "driving_log.csv").write_bytes(
+        "\r".join(["center,left,right,steering,throttle,brake,speed", *lines]).encode() + b"\r")
     _git("init", "-q", cwd=repo)
     _git("config", "uploadpack.allowFilter", "true", cwd=repo)  # a real partial clone, as from GitHub
     _git("add", "-A", cwd=repo)
@@ -235,10 +289,13 @@ def local_repos(tmp_path, monkeypatch) -> tuple[str, Path]:
     _git("rm", "-rq", "data", cwd=repo)
     _git("commit", "-qm", "gone", cwd=repo)
 
-    def entry(name: str, repository: str, rows: RowRange | None = None) -> PublicRecording:
-        return PublicRecording(name, "lake", repository, commit, "data/", rows, "keyboard")
+    def entry(name: str, repository: str, rows: RowRange | None = None, folder: str = "data/",
+              log: str = "driving_log.csv") -> PublicRecording:
+        return PublicRecording(name, "lake", repository, commit, folder, rows, "keyboard", "A", log)
 
-    entries = [entry("whole", "owner/repo"), entry("part", "owner/repo", RowRange(5, 14)), entry("gone", "owner/none")]
+    entries = [entry("whole", "owner/repo"), entry("part", "owner/repo", RowRange(5, 14)), entry("gone", "owner/none"),
+               entry("hard", "owner/repo", folder="other/", log="driving_log_hard.csv"),
+               entry("cr", "owner/repo", RowRange(11, SAMPLE_ROWS), folder="cr/")]
     monkeypatch.setattr(recordings, "public_recordings", lambda: entries)
     return f"file://{tmp_path / 'base'}", tmp_path / "fetched"
 
@@ -257,6 +314,40 @@ def test_fetch_checks_out_the_log_and_frames_at_the_commit(local_repos, capsys):
     assert [s.center.name for s in part] == [s.center.name for s in read_log(UDACITY_SAMPLE)[0][4:14]]
     assert main(argv) == 0  # complete ones are skipped
     assert all("already complete" in line for line in capsys.readouterr().out.splitlines())
+
+
+@needs_git
+def test_fetch_takes_the_log_the_manifest_names(local_repos, capsys):
+    base, out = local_repos
+    assert main(["data", "fetch", "--out", str(out), "--base-url", base, "--name", "hard"]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line.startswith("hard: 20 rows, 108 frames") and " /other/driving_log_hard.csv -> " in line
+    assert sorted(p.name for p in (out / "hard").iterdir()) == [".done", "IMG", "driving_log.csv"]
+    fetched = (out / "hard" / "driving_log.csv").read_text(encoding="utf-8").splitlines()
+    assert fetched == _sample_lines()[:20]  # driving_log_hard.csv, not the folder's driving_log.csv
+    samples, report = read_log(out / "hard")
+    assert report.rows == 20 and not report.skipped
+    assert [s.center.name for s in samples] == [s.center.name for s in read_log(UDACITY_SAMPLE)[0][:20]]
+
+
+@needs_git
+def test_fetch_of_a_cr_only_log_with_a_header_keeps_the_rows_named(local_repos, capsys):
+    base, out = local_repos
+    assert main(["data", "fetch", "--out", str(out), "--base-url", base, "--name", "cr"]) == 0
+    assert capsys.readouterr().out.startswith(f"cr: 26 rows (rows 11-{SAMPLE_ROWS}), 108 frames")
+    text = (out / "cr" / "driving_log.csv").read_text(encoding="utf-8")
+    assert text.splitlines()[0] == "center,left,right,steering,throttle,brake,speed"  # the header stays
+    samples, report = read_log(out / "cr")
+    sample, _ = read_log(UDACITY_SAMPLE)
+    assert report.rows == 26 and not report.skipped
+    assert [s.center.name for s in samples] == [s.center.name for s in sample[10:]]
+    assert [s.steering for s in samples] == [s.steering for s in sample[10:]]
+    # read as it is in the repository (CR-only, header): the same rows, numbered as rows.py numbers them
+    raw = out / "raw.csv"
+    raw.write_bytes("\r".join(["center,left,right,steering,throttle,brake,speed", *_sample_lines()]).encode())
+    assert list(row_numbers(raw).items())[:2] == [(2, 1), (3, 2)] and len(row_numbers(raw)) == SAMPLE_ROWS
+    assert keep_rows(raw, RowRange(11, SAMPLE_ROWS)) == 26
+    assert raw.read_text(encoding="utf-8") == text
 
 
 @needs_git
