@@ -369,8 +369,9 @@ def test_every_public_recording_is_in_a_fold_and_a_driver_in_one_fold_only() -> 
         owner_folds.setdefault(r.repository.split("/")[0], set()).add(r.fold)
     assert all(len(f) == 1 for f in owner_folds.values())
     for fold in "ABCD":
-        held = {r.track for r in recs if r.fold == fold}
-        assert {"lake", "jungle"} <= held
+        held = [r.track for r in recs if r.fold == fold]
+        assert held.count("lake") >= 5 and held.count("jungle") >= 3 and held.count("mountain") >= 1
+        assert sum(r.input == "mouse" for r in recs if r.fold == fold) == 1  # the smooth drivers spread out
         args = fold_arguments(recs, "real/", fold)
         assert args.count("--val-data") == sum(r.fold == fold for r in recs) and len(args) == 2 * len(recs)
         assert "real/0xR4Y" in args
