@@ -24,6 +24,7 @@ from drive_server.models_dir import default_model_path
 from drive_server.pipeline import DriveConfig
 from drive_server.server_config import ServerConfig
 from protocol import SpeedUnit
+from protocol.errors import BadValue, UserError
 
 log = logging.getLogger("drive_server")
 
@@ -121,8 +122,10 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
 
-    def fail(message: str) -> int:
-        print(f"drive_server: error: {message}", file=sys.stderr)
+    def fail(problem: str | UserError) -> int:
+        """One line on stderr, with the error's hint, and exit code 2 (only UserErrors come here: a bug raises)."""
+        hint = problem.hint if isinstance(problem, UserError) else ""
+        print(f"drive_server: error: {problem}" + (f" (hint: {hint})" if hint else ""), file=sys.stderr)
         return 2
 
     try:
@@ -132,17 +135,17 @@ def main(argv: list[str] | None = None) -> int:
         inference = InferenceConfig(threads=args.threads, provider=args.provider)
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
         if args.workers < 1 or (args.workers > 1 and not hasattr(os, "fork")):
-            raise ValueError(f"--workers must be >= 1 (and 1 where fork is unavailable), got {args.workers}")
+            raise BadValue(f"--workers must be >= 1 (and 1 where fork is unavailable), got {args.workers}")
         if args.record is not None and args.workers > 1:
-            raise ValueError("--record works with one server process (--workers 1)")
+            raise BadValue("--record works with one server process (--workers 1)")
         if args.ping_interval < 1:
-            raise ValueError(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
+            raise BadValue(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
         if not 0 <= args.port <= 65535:
-            raise ValueError(f"--port must be in 0..65535, got {args.port}")
+            raise BadValue(f"--port must be in 0..65535, got {args.port}")
         WireLimits(max_connections=args.max_connections, header_timeout_s=args.header_timeout,
                    max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict)
-    except ValueError as exc:
-        return fail(str(exc))
+    except UserError as exc:  # a bare ValueError here is a bug, and keeps its traceback
+        return fail(exc)
     model_path = args.model
     if model_path is None:
         model_path = default_model_path()
@@ -153,13 +156,13 @@ def main(argv: list[str] | None = None) -> int:
         model = SteeringModel(model_path, inference)
         model.warm_up()
     except ModelError as exc:
-        return fail(str(exc))
+        return fail(exc)
 
     # the port too is checked before anything is logged: a port in use is one line, like a bad model
     try:
         sock = listen.listening_socket(args.host, args.port)
     except listen.ListenError as exc:
-        return fail(str(exc))
+        return fail(exc)
 
     # one frame at a time: OpenCV's worker threads only add wake-up latency to a 160x80 resize
     cv2.setNumThreads(1)

@@ -13,6 +13,7 @@ import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT
 
 log = logging.getLogger(__name__)
@@ -35,8 +36,10 @@ _INTERPOLATIONS = ("area", "linear")
 DECODE_REDUCTIONS = (0, 1, 2, 4, 8)
 
 
-class ContractError(ValueError):
+class ContractError(BadValue):
     """The model's preprocessing contract is missing, malformed or inconsistent with the model."""
+
+    hint = "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from protocol.errors import BadValue
 from protocol.facts import DEPLOY_SPEED_KMH, MAX_STEERING_DEG
 
 
@@ -22,11 +23,11 @@ class ControlLaw:
 
     def __post_init__(self) -> None:
         if self.speed_limit_kmh <= 0:
-            raise ValueError(f"speed limit must be positive, got {self.speed_limit_kmh} km/h")
+            raise BadValue(f"speed limit must be positive, got {self.speed_limit_kmh} km/h")
         if self.steer_limit_deg <= 0:
-            raise ValueError(f"steering limit must be positive, got {self.steer_limit_deg} deg")
+            raise BadValue(f"steering limit must be positive, got {self.steer_limit_deg} deg")
         if not 0.0 <= self.tau <= 1.0:
-            raise ValueError(f"tau must be in [0, 1], got {self.tau}")
+            raise BadValue(f"tau must be in [0, 1], got {self.tau}")
 
     def command(self, steering_deg: float, speed_kmh: float) -> float:
         """Throttle/brake command xi for a predicted steering angle (deg) and actual speed (km/h)."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol import SteerCommand
+from protocol.errors import BadValue
 
 
 @dataclass(frozen=True)
@@ -21,9 +22,9 @@ class FallbackPolicy:
 
     def __post_init__(self) -> None:
         if self.hold_frames < 0:
-            raise ValueError(f"hold_frames must be >= 0, got {self.hold_frames}")
+            raise BadValue(f"hold_frames must be >= 0, got {self.hold_frames}")
         if not -1.0 <= self.stop_throttle <= 0.0:
-            raise ValueError(f"stop_throttle must brake (in [-1, 0]), got {self.stop_throttle}")
+            raise BadValue(f"stop_throttle must brake (in [-1, 0]), got {self.stop_throttle}")
 
     @property
     def stop_command(self) -> SteerCommand:

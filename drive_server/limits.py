@@ -36,6 +36,7 @@ from time import monotonic
 from typing import Any
 
 from drive_server.stats import FaultCounters
+from protocol.errors import BadValue
 
 log = logging.getLogger(__name__)
 
@@ -75,15 +76,15 @@ class WireLimits:
 
     def __post_init__(self) -> None:
         if self.max_message_bytes < 1024:
-            raise ValueError(f"the message size limit must be >= 1024 bytes, got {self.max_message_bytes}")
+            raise BadValue(f"the message size limit must be >= 1024 bytes, got {self.max_message_bytes}")
         if self.max_connections < 1:
-            raise ValueError(f"--max-connections must be >= 1, got {self.max_connections}")
+            raise BadValue(f"--max-connections must be >= 1, got {self.max_connections}")
         if not self.header_timeout_s > 0:
-            raise ValueError(f"--header-timeout must be > 0 s, got {self.header_timeout_s}")
+            raise BadValue(f"--header-timeout must be > 0 s, got {self.header_timeout_s}")
         if not self.idle_evict_s > 0:
-            raise ValueError(f"--idle-evict must be > 0 s, got {self.idle_evict_s}")
+            raise BadValue(f"--idle-evict must be > 0 s, got {self.idle_evict_s}")
         if self.max_pending_replies < 2:  # the simulator keeps two frames in flight
-            raise ValueError(f"--max-pending must be >= 2, got {self.max_pending_replies}")
+            raise BadValue(f"--max-pending must be >= 2, got {self.max_pending_replies}")
 
 
 class FaultLog:

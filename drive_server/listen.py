@@ -12,12 +12,14 @@ import errno
 import ipaddress
 import socket
 
+from protocol.errors import UserError
+
 #: Pending connections the kernel queues before ``accept``.
 BACKLOG = 128
 
 
-class ListenError(OSError):
-    """The socket cannot be opened; the message is one line meant for the user."""
+class ListenError(UserError, OSError):
+    """The socket cannot be opened; the message is one line meant for the user (and says what to do)."""
 
 
 def _family_and_address(host: str, port: int) -> tuple[socket.AddressFamily, tuple]:

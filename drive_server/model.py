@@ -16,12 +16,15 @@ import onnxruntime as ort
 
 from drive_server.contract import METADATA_KEY, ContractError, PreprocessContract, infer_contract
 from drive_server.smoothing import SERVING_KEY, serving_alpha
+from protocol.errors import BadValue, UserError
 
 log = logging.getLogger(__name__)
 
 
-class ModelError(Exception):
+class ModelError(UserError):
     """The model file cannot be served; the message is one line meant for the user."""
+
+    hint = "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
 
 
 @dataclass(frozen=True)
@@ -34,7 +37,7 @@ class InferenceConfig:
 
     def __post_init__(self) -> None:
         if self.threads < 1:
-            raise ValueError(f"threads must be >= 1, got {self.threads}")
+            raise BadValue(f"threads must be >= 1, got {self.threads}")
 
 
 def _first_line(exc: BaseException) -> str:

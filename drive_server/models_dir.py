@@ -5,6 +5,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from protocol.errors import BadValue
 from protocol.facts import BEHAVIORS
 
 PRETRAINED_PACKAGE = "models.pretrained"
@@ -29,7 +30,7 @@ def demo_model_path() -> Path:
 def bundled_model_path(behavior: str = "simplistic") -> Path:
     """Path of the bundled model of a driving behavior (simplistic, rigorous or collision)."""
     if behavior not in BEHAVIORS:
-        raise ValueError(f"unknown behavior {behavior!r}; bundled models: {', '.join(BEHAVIORS)}")
+        raise BadValue(f"unknown behavior {behavior!r}; bundled models: {', '.join(BEHAVIORS)}")
     return Path(str(resources.files(PRETRAINED_PACKAGE) / f"{behavior}.onnx"))
 
 

@@ -17,10 +17,11 @@ from drive_server.model import SteeringModel
 from drive_server.preprocess import jpeg_reduction, preprocess
 from drive_server.smoothing import OFF, SteeringSmoother, check_alpha
 from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
+from protocol.errors import UserError
 
 
-class InferenceError(RuntimeError):
-    """The model produced something that is not a usable steering value."""
+class InferenceError(UserError, RuntimeError):
+    """The model produced something that is not a usable steering value (the model's fault, not ours)."""
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from protocol.errors import BadValue
+
 PACKAGE = "robust-behavioral-cloning"
 
 
@@ -57,6 +59,15 @@ def write_text(path: Path, text: str) -> None:
 
 def write_json(path: Path, data: Any, sort_keys: bool = False) -> None:
     write_text(path, json.dumps(data, indent=2, sort_keys=sort_keys, default=str) + "\n")
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file a run, an evaluation or a user wrote; one that is not JSON (cut short, or not text) is the user's
+    to fix: a :class:`~protocol.errors.BadValue` naming the file, not a bug's traceback."""
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError
+        raise BadValue(f"{path}: not valid JSON ({exc})") from None
 
 
 def code_version() -> str:

@@ -7,7 +7,7 @@ output. ``alpha`` 1 is off. The state is one number per client, so one client ne
 steering, and a reconnecting simulator starts afresh.
 
 A model can carry the ``alpha`` it was measured with in its ONNX metadata (``rbc.serving``, written by
-``rbc train --serve-smooth``): drive_server and every tool that drives through its pipeline use it unless
+a training recipe's ``serve_smoothing``): drive_server and every tool that drives through its pipeline use it unless
 told otherwise, so a Unity user who starts ``drive_server`` with no flags gets what was measured.
 """
 
@@ -16,6 +16,8 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
+
+from protocol.errors import BadValue
 
 #: ``alpha`` that leaves every output as it is.
 OFF = 1.0
@@ -26,7 +28,7 @@ SERVING_KEY = "rbc.serving"
 def check_alpha(alpha: float) -> float:
     """``alpha`` if it is a usable weight of the new output (0 < alpha <= 1), else ValueError."""
     if not isinstance(alpha, int | float) or not math.isfinite(alpha) or not 0.0 < alpha <= 1.0:
-        raise ValueError(f"steering smoothing must be above 0 and at most 1 (1: off), got {alpha!r}")
+        raise BadValue(f"steering smoothing must be above 0 and at most 1 (1: off), got {alpha!r}")
     return float(alpha)
 
 
@@ -42,9 +44,9 @@ def serving_alpha(text: str | None) -> float:
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{SERVING_KEY} is not valid JSON: {exc}") from None
+        raise BadValue(f"{SERVING_KEY} is not valid JSON: {exc}") from None
     if not isinstance(data, dict) or set(data) - {"smooth"}:
-        raise ValueError(f"{SERVING_KEY} must be a JSON object with at most the key 'smooth'")
+        raise BadValue(f"{SERVING_KEY} must be a JSON object with at most the key 'smooth'")
     return check_alpha(data.get("smooth", OFF))
 
 

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
+from protocol.errors import BadValue
 from protocol.facts import IMAGE_MAGIC
 
 log = logging.getLogger(__name__)
@@ -32,8 +33,10 @@ IMAGE_DIRS = ("IMG", "Camera-Frames", ".")
 COLUMNS = ("center", "left", "right", "steering", "throttle", "brake", "speed")
 
 
-class DataLogError(ValueError):
+class DataLogError(BadValue):
     """A driving log cannot be used at all (missing, empty, or no usable row)."""
+
+    hint = "give a recording folder with driving_log.csv and IMG/, as rbc collect or the simulator writes"
 
 
 @dataclass(frozen=True, slots=True)

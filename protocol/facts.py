@@ -1,4 +1,9 @@
-"""Facts of the simulator and the paper that every package shares, defined here and nowhere else."""
+"""Facts of the simulator and the paper that every package shares, defined here and nowhere else.
+
+The real simulator's camera rig (field of view, pitch, height, side offset, bonnet row, the car's width) is
+facts too; they live in :mod:`protocol.camera`, beside the pinhole maths that uses them (numpy: this module
+stays standard library only).
+"""
 
 from __future__ import annotations
 

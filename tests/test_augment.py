@@ -14,8 +14,8 @@ from drive_server.preprocess import frame_to_network_image
 from models.augmentation import augment, geometry
 from models.augmentation.augment import CAMERAS, CENTER, LEFT, RIGHT, AugmentSpec, augment_reference, draw_params
 from models.augmentation.fastaug import FastAugmenter, augment_batch
+from models.data.behavior import BEHAVIOR_SPECS, NVIDIA_AUGMENT, Behavior
 from models.data.framecache import FrameCache, build_cache, load_frame
-from models.training.behavior import BEHAVIOR_SPECS, NVIDIA_AUGMENT, Behavior
 from protocol.datalog import read_log
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"

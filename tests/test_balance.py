@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from models.data.balance import balanced_pass, index_batches, zero_steer_drop_count
+from models.data.behavior import BEHAVIOR_SPECS, Behavior
 from models.data.split import split_indices
-from models.training.behavior import BEHAVIOR_SPECS, Behavior
 
 
 @pytest.mark.parametrize(("d", "lam"), [(433, 0.7), (10, 0.7), (10, 0.8), (3, 0.7), (7, 0.0), (7, 1.0), (0, 0.8)])

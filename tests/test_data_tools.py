@@ -17,12 +17,12 @@ import pytest
 from models.data.labels import centred_average
 from protocol.datalog import read_log
 from protocol.datalog_writer import LogWriter, frame_name, parse_frame_stamp
+from protocol.rows import RowRange, keep_rows, parse_rows, row_numbers
+from protocol.stamps import frame_time, session_ids
 from tests.conftest import UDACITY_SAMPLE
 from tools.cli import main
 from tools.realdata import recordings
 from tools.realdata.recordings import PublicRecording, public_recordings, select
-from tools.realdata.rows import RowRange, keep_rows, parse_rows, row_numbers
-from tools.realdata.stamps import frame_time, session_ids
 from tools.realdata.stats import INTENT_FRAMES, intent_r, steering_input
 
 REPO = Path(__file__).resolve().parents[1]

@@ -131,3 +131,98 @@ def test_a_person_drives_the_time_a_takeover_costs_before_handing_back(tmp_path:
     assert at_once["interventions"] >= 3 and 1 <= after["interventions"] < at_once["interventions"]
     assert np.all(np.diff(times) >= 6.0)
     assert after["driving_time_s"] == pytest.approx(at_once["driving_time_s"], rel=0.1)
+
+
+def test_the_loop_rules_check_their_own_ranges() -> None:
+    """Was: rbc drive-log checked --max-offset, --handback, --speed-limit and --wheelbase itself, rbc data crossval
+    --max-offset itself and the hand-back time through the rules: three places for one set of rules."""
+    from protocol.errors import BadValue
+    from tools.drivelog.loop import LoopRules
+
+    for field, value, flag in [("max_offset_m", 0.0, "--max-offset"), ("handback_s", 61.0, "--handback"),
+                               ("speed_limit_kmh", 301.0, "--speed-limit"), ("wheelbase_m", 0.5, "--wheelbase"),
+                               ("max_offset_m", math.nan, "--max-offset")]:
+        with pytest.raises(BadValue, match=f"^{flag} must be"):
+            LoopRules(**{field: value})
+    LoopRules(max_offset_m=0.05, handback_s=0.0, speed_limit_kmh=0.0, wheelbase_m=20.0)  # the ends are allowed
+
+
+@pytest.mark.parametrize("argv", [
+    ["drive-log", "--data", str(SAMPLE), "--baseline", "zero", "--handback", "61"],
+    ["data", "crossval", "--models", "m-{fold}.onnx", "--name", "0xR4Y", "--handback", "61"],
+])
+def test_both_commands_refuse_bad_rules_with_the_rules_own_words(argv: list[str], capsys) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"rbc {argv[0]}: error: --handback must be 0..60 seconds, got 61"
+
+
+def test_drive_log_crossval_and_the_road_go_through_one_assembly(tmp_path: Path, monkeypatch) -> None:
+    """Was: the closed loop on a recording was put together three times (rbc drive-log, rbc data crossval, rbc data
+    road: driver, wheelbase, road, loop); now tools.drivelog.run does it for all of them."""
+    from tools.drivelog import run
+    from tools.realdata.crossval import _closed_loop
+
+    calls: list[str] = []
+    real_drive, real_road = run.drive_recording, run.car_and_road
+    monkeypatch.setattr(run, "drive_recording", lambda *a, **k: calls.append("drive") or real_drive(*a, **k))
+    monkeypatch.setattr(run, "car_and_road", lambda *a, **k: calls.append("road") or real_road(*a, **k))
+    data = _curve_log(tmp_path)
+    model = Path(__file__).resolve().parents[1] / "models" / "pretrained" / "simplistic.onnx"
+    out = tmp_path / "r.json"
+    assert main(["drive-log", "--data", str(data), "--model", str(model), "--json", str(out),
+                 "--strip", str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png")]) == 0
+    eta, takeovers, _, off_road = _closed_loop(data, model, None, None)
+    assert main(["data", "road", str(data)]) == 0
+    assert calls == ["drive", "road", "drive", "road", "road"]
+    record = json.loads(out.read_text())
+    assert (record["eta"], record["interventions"], record["off_road_s"]) == (eta, takeovers, off_road)
+
+
+def test_only_the_chosen_rows_are_driven_each_stretch_from_the_recorded_path(tmp_path: Path) -> None:
+    """Issue 43: a model is checked on the stretches its training held out, so drive-log drives chosen rows only."""
+    from protocol.datalog import read_log
+    from tools.drivelog.loop import LoopRules, drive
+    from tools.drivelog.path import recorded_drive
+    from tools.drivelog.rows import chosen_rows, parse_row_ranges, rows_mask
+
+    samples = read_log(_curve_log(tmp_path, steering=0.0))[0]
+    log = recorded_drive(samples)
+    keep = rows_mask(samples, parse_row_ranges("3-10,20-30"))
+    assert list(np.flatnonzero(keep)) == [*range(2, 10), *range(19, 30)]
+    cut, _ = chosen_rows(log, None, keep)
+    assert [p.name for p in cut.frames] == [log.frames[i].name for i in np.flatnonzero(keep)]
+    assert len(np.unique(cut.session)) == 2 and cut.arc[0] == 0.0 and cut.arc[8] == 0.0 and cut.dt[7] == 0.0
+    shown: list[str] = []
+    result = drive(cut, lambda view, i: shown.append(cut.frames[i].name) or 0.0,
+                   LoopRules(lane="path", speed_limit_kmh=0.0, wheelbase_m=2.6), snapshots=0)
+    assert set(shown) == {p.name for p in cut.frames[:7]} | {p.name for p in cut.frames[8:-1]}  # not the ends
+    assert result.driving_time_s == pytest.approx(float(cut.dt.sum()))  # the gap between the stretches not driven
+
+
+def test_drive_log_drives_the_rows_asked_for_or_those_a_run_held_out(tmp_path: Path) -> None:
+    from dataclasses import asdict
+
+    from models.data.trainingdata import split_logs
+    from models.training.train_config import TrainConfig
+    from protocol.datalog import read_log
+    from tools.drivelog.rows import held_out_mask
+
+    data = _curve_log(tmp_path)
+    out = tmp_path / "r.json"
+    common = ["--data", str(data), "--baseline", "recorded", "--wheelbase", "2.6", "--lane", "path", "--json", str(out),
+              "--strip", str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png")]
+    assert main(["drive-log", *common, "--rows", "1-12,25-36"]) == 0
+    record = json.loads(out.read_text())
+    assert record["frames"] == 24 and record["rows"].endswith("24 frames in 2 stretches")
+    # a training run's config.json says which logs it read and how it split them: the held-out blocks come back
+    run = tmp_path / "run"
+    run.mkdir()
+    config = TrainConfig(data=[str(data)], out=str(run), block_frames=6, gap_frames=1, seed=3)
+    (run / "config.json").write_text(json.dumps({"config": asdict(config)}))
+    samples = read_log(data)[0]
+    _, _, val = split_logs(config.data, config.seed, config.data_options())
+    assert list(np.flatnonzero(held_out_mask(samples, run))) == list(val) and 0 < len(val) < len(samples)
+    assert main(["drive-log", *common, "--held-out-of", str(run)]) == 0
+    assert json.loads(out.read_text())["frames"] == len(val)
+    assert main(["drive-log", *common, "--rows", "900-950"]) == 2

@@ -179,7 +179,7 @@ def test_train_stops_on_a_full_disk_keeps_its_last_checkpoint_and_resume_ends_as
     pytest.importorskip("torch")
     import models.training.train as train_mod
     from models.networks.checkpoint import save_checkpoint
-    from models.training.runfiles import read_history
+    from models.networks.runfiles import read_history
 
     flags = ["train", "--data", str(SAMPLE_LOG), "--epochs", "3", "--max-steps-per-epoch", "3", "--threads", "1",
              "--no-progress", "--seed", "3"]

@@ -149,6 +149,219 @@ def test_no_import_cycles():
     assert cycles == []
 
 
+def _package(module: str) -> str:
+    """The package a module belongs to: itself for a package's ``__init__``, else the folder it sits in."""
+    return module if MODULES[module].name == "__init__.py" else module.rsplit(".", 1)[0]
+
+
+#: Edges between packages allowed despite the rule (none: every entry needs its why and its fix).
+PENDING_EDGES: set[tuple[str, str]] = set()
+
+
+def _package_graph() -> dict[str, dict[str, list[str]]]:
+    """package -> package it imports -> the module imports that make the edge (an import of a.b.c from x.y.z
+    is an edge x.y -> a.b; a package's __init__ importing its own sub-packages is a re-export, not an edge)."""
+    graph: dict[str, dict[str, list[str]]] = {}
+    for name, path in MODULES.items():
+        source = _package(name)
+        graph.setdefault(source, {})
+        for imp in _imports(path):
+            if imp not in MODULES or (name, imp) in PENDING_EDGES:
+                continue
+            target = _package(imp)
+            if target != source and not (name == source and target.startswith(source + ".")):
+                graph[source].setdefault(target, []).append(f"{name} -> {imp}")
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one node (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def test_no_import_cycles_between_packages():
+    """Was: tools.drivelog and tools.realdata imported each other, and so did the rooms of models/ (networks ->
+    training -> networks ...): a cycle of modules never formed, so test_no_import_cycles did not see them."""
+    graph = _package_graph()
+    found = _cycles({p: set(targets) for p, targets in graph.items()})
+    edges = [f"{a} -> {b}: {graph[a][b][:3]}" for cycle in found for a in cycle for b in cycle if b in graph[a]]
+    assert found == [], edges
+
+
+def test_the_package_cycle_check_sees_a_cycle():
+    assert _cycles({"a.x": {"a.y"}, "a.y": {"a.z"}, "a.z": {"a.x"}, "b": {"a.x"}}) == [["a.x", "a.y", "a.z"]]
+    assert _cycles({"a.x": {"a.y"}, "a.y": set(), "b": {"a.x"}}) == []
+    assert "tools.drivelog" in _package_graph()["tools.realdata"]  # rbc data crossval drives through drivelog
+
+
+def test_no_folder_of_models_or_tools_holds_more_than_15_modules():
+    """A room with more than 15 modules holds more than one job. tools/commands is the exception by design: one
+    module per rbc subcommand (test_command_modules_hold_no_library_code_and_do_not_import_each_other)."""
+    crowded = {}
+    for root in ("models", "tools"):
+        for folder in [REPO / root, *(p for p in (REPO / root).rglob("*") if p.is_dir())]:
+            count = len([m for m in folder.glob("*.py") if m.name != "__init__.py"])
+            if count > 15 and folder != REPO / "tools" / "commands":
+                crowded[str(folder.relative_to(REPO))] = count
+    assert crowded == {}
+
+
+#: The real simulator's camera rig (protocol.camera): a literal number, and the word a name must hold for it to
+#: count (None: any name) -- 60 degrees and row 137 are common numbers, only a field of view or a bonnet is ours.
+CAMERA_NUMBERS: dict[float, str | None] = {0.95: None, 6.2: None, 1.4: None, 60.0: "fov", 137: "bonnet"}
+#: Assignments of those numbers that mean something else, and why.
+CAMERA_COINCIDENCES = {
+    ("tools/sim/vehicle/kinematic.py", "front_grip_factor"),  # a tyre grip balance (0.95 front / 1.05 rear)
+}
+
+
+def _camera_number_assignments(path: Path) -> list[tuple[str, str, float]]:
+    """(file, name, value) of every assignment, keyword argument or default that is one of the camera's numbers."""
+    def number(node: ast.AST) -> float | None:
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            node = node.operand
+        ok = isinstance(node, ast.Constant) and type(node.value) in (int, float)
+        return node.value if ok else None
+
+    def named(name: str, node: ast.AST) -> list[tuple[str, str, float]]:
+        value = number(node)
+        if value is None or value not in CAMERA_NUMBERS or (type(value) is int and CAMERA_NUMBERS[value] is None):
+            return []
+        word = CAMERA_NUMBERS[value]
+        return [(file, name, value)] if word is None or word in name.lower() else []
+
+    file = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else path.name
+
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Assign):
+            found += [hit for t in node.targets for hit in named(ast.unparse(t), node.value)]
+        elif isinstance(node, ast.AnnAssign) and node.value is not None:
+            found += named(ast.unparse(node.target), node.value)
+        elif isinstance(node, ast.keyword) and node.arg:
+            found += named(node.arg, node.value)
+        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            args = node.args.posonlyargs + node.args.args
+            pairs = [*zip(args[len(args) - len(node.args.defaults):], node.args.defaults, strict=True),
+                     *((a, d) for a, d in zip(node.args.kwonlyargs, node.args.kw_defaults, strict=True) if d)]
+            found += [hit for a, d in pairs for hit in named(a.arg, d)]
+    return found
+
+
+def test_the_real_cameras_numbers_live_in_one_module():
+    """Was: the side cameras' 0.95 m, the 60 degree field of view, the 6.2 degree pitch, the 1.40 m height and the
+    bonnet's row were written in six files (augmentation, renderer, drive-log, training), and the pinhole and
+    pitch maths twice; now protocol.camera holds them and everyone imports them."""
+    where = {}
+    for path in MODULES.values():
+        for file, name, value in _camera_number_assignments(path):
+            if (file, name) not in CAMERA_COINCIDENCES:
+                where.setdefault(file, []).append(f"{name} = {value}")
+    assert list(where) == ["protocol/camera.py"], where
+    assert sorted(where["protocol/camera.py"]) == sorted([
+        "VFOV_DEG = 60.0", "PITCH_DEG = 6.2", "SIDE_OFFSET_M = 0.95", "HEIGHT_M = 1.4", "BONNET_ROW = 137",
+        "CAR_HALF_WIDTH_M = 0.95"])
+
+
+def test_the_camera_check_finds_a_copied_number(tmp_path):
+    copied = tmp_path / "copied.py"
+    copied.write_text("SIDE = 0.95\nBARRIER_RADIUS = 60.0\nclass Cam:\n    vfov_deg: float = 60.0\n\n"
+                      "def f(pitch=-6.2, rows=137):\n    return g(bonnet_row=137)\n")
+    assert sorted((n, v) for _, n, v in _camera_number_assignments(copied)) == [
+        ("SIDE", 0.95), ("bonnet_row", 137), ("pitch", 6.2), ("vfov_deg", 60.0)]
+
+
+def test_the_pinhole_maths_is_protocol_cameras():
+    """The augmentation's turned camera, the closed loop's view synthesis and the renderer share one pinhole."""
+    from models.augmentation import geometry
+    from protocol import camera
+    from tools.drivelog.camera import DEFAULT_CAMERA
+    from tools.sim.render.camera import focal_px
+
+    assert DEFAULT_CAMERA.focal_px == camera.focal_px(160) == focal_px()
+    assert np.array_equal(DEFAULT_CAMERA.intrinsics(), camera.intrinsics(320, 160))
+    for name in ("intrinsics", "pitch_matrix"):
+        assert getattr(geometry, name) is getattr(camera, name)
+
+
+def test_mirror_and_ensemble_need_onnx_but_not_torch():
+    """Was: rbc mirror and rbc ensemble, which only edit ONNX graphs, asked for the train extra (torch)."""
+    import subprocess
+
+    code = ("import sys; sys.modules['torch'] = None\n"  # an import of torch now fails, as when it is not installed
+            "import tools.commands.mirror, tools.commands.ensemble, models.onnxfiles.mirror_onnx, "
+            "models.onnxfiles.ensemble_onnx\n"
+            "from tools.cli import BY_NAME, EXTRAS\n"
+            "assert all(EXTRAS[BY_NAME[c].extra] == ('onnx',) for c in ('mirror', 'ensemble'))\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'torch' and sys.modules[m] is not None))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+#: Names that say "center" because a file or the wire does: the Udacity log's ``center`` column and camera, and
+#: the track file's keys. Everything else of ours is spelt the project's British way: "centre".
+CENTER_BY_FORMAT = {
+    ("protocol/datalog.py", "center"),  # Sample.center: the log's center column
+    ("models/augmentation/augment.py", "CENTER"),  # the index of the camera named "center" (protocol.facts.CAMERAS)
+    ("tools/sim/track/road.py", "centerline"),  # the track file's "centerline" key
+    ("tools/sim/track/road.py", "center"),  # a pond's "center" key in a track file
+    ("tools/sim/track/looks.py", "center_color"),  # the track file's edges.center_color key
+    ("tools/sim/track/looks.py", "center_style"),  # ... edges.center_style
+    ("tools/sim/track/looks.py", "CENTER_COLORS"),  # the values center_color takes
+}
+
+
+def test_centre_is_spelt_one_way_where_no_format_says_center():
+    """Was: "centre" and "center" both named things of ours (the car's ``center``, the dashboard's bar)."""
+    found = set()
+    for path in MODULES.values():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = []
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                names.append(node.name)
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                names += [a.arg for a in node.args.posonlyargs + node.args.args + node.args.kwonlyargs]
+            if isinstance(node, ast.Assign):
+                names += [t.id for t in node.targets if isinstance(t, ast.Name)]
+                names += [e.id for t in node.targets if isinstance(t, ast.Tuple) for e in t.elts
+                          if isinstance(e, ast.Name)]
+            if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+                names.append(node.target.id)
+            found |= {(path.relative_to(REPO).as_posix(), n) for n in names if "center" in n.lower()}
+    assert found - CENTER_BY_FORMAT == set()
+    static = REPO / "drive_server" / "static"
+    assert not [p.name for p in static.iterdir() if p.suffix in (".html", ".css", ".js")
+                and "center" in p.read_text(encoding="utf-8")]
+
+
 # --------------------------------------------------------------------------- one decode for serving and training
 
 
@@ -200,7 +413,7 @@ def test_main_parses_with_the_named_subcommand_even_when_values_name_others(argv
 def test_every_subcommand_module_loads_and_builds_its_parser():
     for cmd in SUBCOMMANDS:
         if cmd.extra:
-            pytest.importorskip("torch" if cmd.extra == "train" else "matplotlib")
+            pytest.importorskip({"train": "torch", "onnx": "onnx"}.get(cmd.extra, "matplotlib"))
         module = load(cmd)
         assert callable(module.run)
         assert subcommand_parser(cmd, module).prog == f"rbc {cmd.name}"

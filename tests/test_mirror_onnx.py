@@ -100,7 +100,8 @@ def test_a_lane_keeping_model_is_not_mirrored_nor_trained_mirrored(tmp_path: Pat
     assert rbc(["mirror", str(model), "--out", str(tmp_path / "m.onnx")]) == 2
     err = capsys.readouterr().err.strip()
     assert "keeps to one lane" in err and "\n" not in err and not (tmp_path / "m.onnx").exists()
-    assert rbc(["train", "--data", str(tmp_path), "--behavior", "rigorous", "--mirror-average",
-                "--out", str(tmp_path / "run")]) == 2
+    recipe = tmp_path / "rigorous-mirrored.toml"
+    recipe.write_text('[network]\nbehavior = "rigorous"\n\n[export]\nmirror_average = true\n')
+    assert rbc(["train", "--recipe", str(recipe), "--data", str(tmp_path), "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
     assert "keeps to one lane" in err and "\n" not in err and not (tmp_path / "run").exists()

@@ -72,7 +72,7 @@ def test_torch_and_onnx_builders_make_the_same_layers_from_the_one_table(name):
 @pytest.mark.parametrize("approach", ["ours", "nvidia"])
 def test_each_network_is_fed_at_its_own_input_size(arch, size, approach):
     """The contract a run trains and serves with is the network's size, whichever approach."""
-    from models.training.behavior import pipeline_for
+    from models.data.behavior import pipeline_for
 
     contract = pipeline_for("simplistic", arch, approach).contract
     assert (contract.width, contract.height) == size

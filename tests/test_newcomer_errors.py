@@ -122,6 +122,7 @@ def test_verbose_shows_the_traceback(tmp_path):
     (["train", "--data", "x", "--out", "y"], "train", "torch"),
     (["inspect", "run"], "train", "torch"),
     (["augment-preview", "--data", "x", "--out", "g.png"], "plots", "matplotlib"),
+    (["mirror", "m.onnx", "--out", "x.onnx"], "onnx", "onnx"),  # an ONNX graph edit: onnx alone, not train's torch
 ])
 def test_a_missing_extra_is_named_with_its_install_line(command, extra, hidden, monkeypatch, capsys):
     real = importlib.util.find_spec
@@ -208,3 +209,116 @@ def test_output_piped_into_a_reader_that_leaves_is_not_an_error(tmp_path):
     os.close(write)
     assert proc.returncode == 141, proc.stderr
     assert proc.stderr == ""
+
+
+# --------------------------------------------------------------------------- what is the user's, what is a bug
+
+
+def _with_run(monkeypatch, command: str, error: BaseException) -> None:
+    """Make ``rbc command``'s run raise ``error`` (its arguments still parse as usual)."""
+    from tools.cli import BY_NAME, load
+
+    def run(args):
+        raise error
+
+    monkeypatch.setattr(load(BY_NAME[command]), "run", run)
+
+
+def test_a_bare_value_error_inside_a_command_is_a_bug_with_its_traceback(monkeypatch, capsys):
+    """Was: every ValueError counted as bad input, so a numpy bug printed one line and no traceback."""
+    _with_run(monkeypatch, "fuzz", ValueError("operands could not be broadcast together with shapes (3,) (4,)"))
+    with pytest.raises(ValueError, match="broadcast"):
+        rbc(["fuzz"])
+    assert "error:" not in capsys.readouterr().err
+
+
+def test_a_bad_value_inside_a_command_is_one_line_with_its_hint(monkeypatch, capsys):
+    from protocol.errors import BadValue
+
+    _with_run(monkeypatch, "fuzz", BadValue("--rounds must be >= 1, got 0", hint="give a positive count"))
+    assert rbc(["fuzz"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "rbc fuzz: error: --rounds must be >= 1, got 0 (hint: give a positive count)"
+
+
+def _our_error_classes() -> list[tuple[type, tuple[type, ...], str]]:
+    """Each error class of ours, the base(s) code catches it by, and the hint the boundary once chose by its name."""
+    from drive_server.contract import ContractError
+    from drive_server.listen import ListenError
+    from drive_server.model import ModelError
+    from drive_server.pipeline import InferenceError
+    from models.data.framecache import FrameError
+    from models.onnxfiles.ensemble_onnx import EnsembleError
+    from models.onnxfiles.mirror_onnx import MirrorError
+    from protocol.datalog import DataLogError
+    from protocol.errors import ProtocolError
+    from tools.errors import CommandError
+    from tools.evaluate.cluster import RunLostError
+    from tools.sim.collect.dataset import OutputDirError
+    from tools.sim.track.road import TrackError
+    from tools.wire.server_process import ServerStartError
+    from tools.wire.websocket import ConnectionClosed
+
+    model = "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
+    out = [(DataLogError, (ValueError,), "give a recording folder with driving_log.csv and IMG/, as rbc collect or "
+                                         "the simulator writes"),
+           (TrackError, (ValueError,), "the track file format is in docs/formats.md (File formats: Track file)"),
+           (ModelError, (), model), (ContractError, (ValueError,), model),
+           (OutputDirError, (ValueError,), ""), (ProtocolError, (ValueError,), ""), (FrameError, (ValueError,), ""),
+           (MirrorError, (ValueError,), ""), (EnsembleError, (ValueError,), ""), (CommandError, (), ""),
+           (ListenError, (OSError,), ""), (InferenceError, (RuntimeError,), ""),
+           (ServerStartError, (RuntimeError,), ""), (RunLostError, (), "rbc eval --resume continues from the journal"),
+           (ConnectionClosed, (ConnectionError,), "is drive_server running at that address?")]
+    if importlib.util.find_spec("torch") is not None:
+        from models.networks.checkpoint import RunDirError
+        from models.onnxfiles.export import ExportError
+        from models.onnxfiles.peer_keras import PeerImportError
+        from models.training.distributed import DistributedError
+
+        out += [(ExportError, (RuntimeError,), model), (RunDirError, (RuntimeError,), ""),
+                (PeerImportError, (ValueError,), ""), (DistributedError, (), "")]
+    return out
+
+
+def test_every_error_of_ours_is_a_user_error_that_carries_its_hint():
+    """Was: the boundary chose hints by the exception's class name as a string (``_hint_for``); now each class
+    carries its hint, and keeps the base (ValueError, OSError, RuntimeError) code catches it by."""
+    from protocol.errors import UserError
+    from tools.errors import is_user_error, one_line
+
+    for cls, bases, hint in _our_error_classes():
+        exc = cls("something was wrong")
+        assert isinstance(exc, UserError) and all(isinstance(exc, b) for b in bases), cls
+        assert is_user_error(exc) and exc.hint == hint, cls
+        assert one_line("x", exc) == "rbc x: error: something was wrong" + (f" (hint: {hint})" if hint else ""), cls
+
+
+def test_only_the_class_not_its_name_chooses_the_hint():
+    from tools.errors import is_user_error, one_line
+
+    impostor = type("DataLogError", (ValueError,), {})("no driving_log.csv")  # a foreign class of the same name
+    assert not is_user_error(impostor) and one_line("x", impostor) == "rbc x: error: no driving_log.csv"
+    assert is_user_error(TimeoutError()) and is_user_error(ConnectionRefusedError()) and is_user_error(OSError(2, "x"))
+    assert not is_user_error(ValueError("a numpy bug")) and not is_user_error(KeyError("a bug"))
+
+
+def test_drive_servers_boundary_keeps_a_bugs_traceback_and_gives_a_bad_values_hint(monkeypatch, capsys):
+    """drive_server's own boundary caught every ValueError of its settings as bad input too."""
+    import drive_server.cli as server_cli
+    from drive_server.pipeline import DriveConfig
+    from protocol.errors import BadValue
+
+    def broken(self):
+        raise ValueError("a bug in the control law's code")
+
+    monkeypatch.setattr(DriveConfig, "control_law", broken)
+    with pytest.raises(ValueError, match="a bug"):
+        server_cli.main(["--port", "0"])
+
+    def refused(self):
+        raise BadValue("tau must be in [0, 1], got 2", hint="give --tau between 0 and 1")
+
+    monkeypatch.setattr(DriveConfig, "control_law", refused)
+    assert server_cli.main(["--port", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "drive_server: error: tau must be in [0, 1], got 2 (hint: give --tau " \
+                                              "between 0 and 1)"

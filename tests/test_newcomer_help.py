@@ -7,6 +7,7 @@ import argparse
 import pytest
 
 from drive_server.cli import build_parser as drive_server_parser
+from tools.arguments import MovedToRecipe
 from tools.cli import SUBCOMMANDS, load, subcommand_parser
 
 
@@ -20,7 +21,9 @@ def _parsers() -> list[tuple[str, argparse.ArgumentParser]]:
 
 
 def _flags(parser: argparse.ArgumentParser) -> list[argparse.Action]:
-    return [a for a in parser._actions if not isinstance(a, argparse._HelpAction | argparse._VersionAction)]
+    """The flags a user sees (not the hidden ones that only say where a setting moved)."""
+    return [a for a in parser._actions
+            if not isinstance(a, argparse._HelpAction | argparse._VersionAction | MovedToRecipe)]
 
 
 def test_every_flag_of_every_command_has_help():

@@ -76,8 +76,8 @@ def _log_with_speeds(folder: Path, speeds: list[float]) -> Path:
 ])
 def test_min_speed_drops_slow_rows_in_its_own_unit(tmp_path: Path, log_unit: str, threshold: float, unit: str,
                                                    dropped: int) -> None:
+    from models.data.behavior import pipeline_for
     from models.data.trainingdata import DataOptions, prepare_data
-    from models.training.behavior import pipeline_for
 
     data = _log_with_speeds(tmp_path / "rec", [0.0, 3.0, 4.9, 5.0, 10.0, 30.0] * 3)
     options = DataOptions(SplitSpec("random"), threshold, unit, log_unit)
@@ -102,8 +102,10 @@ def test_train_prints_the_row_summary(tmp_path: Path, capsys) -> None:
     pytest.importorskip("torch")
     from tools.cli import main
 
-    rc = main(["train", "--data", str(SAMPLE), "--out", str(tmp_path / "r"), "--epochs", "1",
-               "--max-steps-per-epoch", "1", "--threads", "1", "--no-progress", "--min-speed", "30.19mph"])
+    recipe = tmp_path / "slow.toml"
+    recipe.write_text('[data]\nmin_speed = 30.19\nmin_speed_unit = "mph"\n')
+    rc = main(["train", "--recipe", str(recipe), "--data", str(SAMPLE), "--out", str(tmp_path / "r"), "--epochs", "1",
+               "--max-steps-per-epoch", "1", "--threads", "1", "--no-progress"])
     assert rc == 0
     out = capsys.readouterr().out
     assert "rows: 36 read, 0 skipped (bad rows or missing images), 0 with unreadable frames, " in out
@@ -126,8 +128,8 @@ def test_fast_path_applies_the_scale_mode_like_the_reference() -> None:
 
     from models.augmentation.augment import brightness, no_augmentation
     from models.augmentation.fastaug import FastAugmenter
+    from models.data.behavior import pipeline_for
     from models.data.framecache import build_cache
-    from models.training.behavior import pipeline_for
 
     samples, _ = read_log(SAMPLE)
     p = pipeline_for("simplistic", "shallow", "ours")
@@ -152,10 +154,10 @@ def test_config_pipeline_carries_crop_and_brightness() -> None:
 
 
 def test_smoothed_labels_train_but_never_score_and_never_leak() -> None:
+    from models.data.behavior import pipeline_for
     from models.data.trainingdata import DataOptions, prepare_data
-    from models.training.behavior import pipeline_for
 
-    options = DataOptions(SplitSpec("blocks", block_frames=7, gap_frames=0), smooth_frames=5)
+    options = DataOptions(SplitSpec("blocks", block_frames=7, gap_frames=0), label_smoothing_frames=5)
     data = prepare_data([SAMPLE], pipeline_for("simplistic", "shallow", "ours"), 2, options, workers=1)
     raw = data.steering.astype(np.float64)
     assert not np.array_equal(data.targets, data.steering)  # the sample has taps to average

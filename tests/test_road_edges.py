@@ -11,9 +11,10 @@ import cv2
 import numpy as np
 import pytest
 
+from protocol.camera import pitch_matrix
 from protocol.datalog import DataLogError, read_log
 from protocol.jpeg import read_jpeg_file
-from tools.drivelog.camera import DEFAULT_CAMERA, ViewSynthesizer, _pitch, ground_to_pixels
+from tools.drivelog.camera import DEFAULT_CAMERA, ViewSynthesizer, ground_to_pixels
 from tools.drivelog.loop import LoopRules, _view, lane_limits
 from tools.drivelog.path import RecordedDrive, recorded_drive
 from tools.drivelog.road import RoadEdges, estimate_road
@@ -31,7 +32,7 @@ def _render(road_left: float, road_right: float, seed: int = 0,
     cam = DEFAULT_CAMERA
     v, u = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
     rays = np.linalg.inv(cam.intrinsics()) @ np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
-    level = _pitch(cam.pitch_deg).T @ rays
+    level = pitch_matrix(cam.pitch_deg).T @ rays
     down = level[1] > 1e-6
     t = np.where(down, cam.height_m / np.where(down, level[1], 1.0), 0.0)
     x = (t * level[0]).reshape(u.shape)
@@ -145,9 +146,9 @@ def _sample_with_road(tmp_path: Path, middle_of: dict[str, float] | None = None)
 
 
 def test_the_centre_gain_adds_steering_towards_the_roads_middle_and_never_scores_it(tmp_path: Path) -> None:
+    from models.data.behavior import pipeline_for
     from models.data.roadfile import ROAD_FILE, read_road_middles
     from models.data.trainingdata import DataOptions, prepare_data
-    from models.training.behavior import pipeline_for
 
     data = _sample_with_road(tmp_path)
     pipeline = pipeline_for("simplistic", "shallow", "ours")
@@ -161,8 +162,8 @@ def test_the_centre_gain_adds_steering_towards_the_roads_middle_and_never_scores
 
 
 def test_the_centre_gain_without_a_road_file_is_one_clear_error(tmp_path: Path) -> None:
+    from models.data.behavior import pipeline_for
     from models.data.trainingdata import DataOptions, prepare_data
-    from models.training.behavior import pipeline_for
     from protocol.datalog import DataLogError
 
     data = tmp_path / "rec"
@@ -212,8 +213,8 @@ def test_the_edge_pull_moves_labels_only_where_asked_and_draws_nothing(tmp_path:
 
 
 def test_rbc_train_keeps_the_road_middles_for_the_edge_pull(tmp_path: Path) -> None:
+    from models.data.behavior import pipeline_for
     from models.data.trainingdata import DataOptions, prepare_data
-    from models.training.behavior import pipeline_for
 
     data = _sample_with_road(tmp_path)
     pipeline = pipeline_for("simplistic", "shallow", "ours")

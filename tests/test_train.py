@@ -159,7 +159,7 @@ def test_cli_pilotnet_nvidia_approach(tmp_path: Path) -> None:
     from tools.cli import main
 
     out = tmp_path / "pilotnet"
-    rc = main(["train", "--data", str(SAMPLE), "--arch", "pilotnet", "--approach", "nvidia", "--out", str(out),
+    rc = main(["train", "--recipe", "pilotnet_nvidia", "--data", str(SAMPLE), "--out", str(out),
                "--epochs", "1", "--max-steps-per-epoch", "1", "--threads", "1", "--no-progress"])
     assert rc == 0
     session = ort.InferenceSession(str(out / "model.onnx"), providers=["CPUExecutionProvider"])
@@ -167,7 +167,11 @@ def test_cli_pilotnet_nvidia_approach(tmp_path: Path) -> None:
     assert PreprocessContract.from_json(meta[METADATA_KEY]) == NVIDIA_CONTRACT
     assert json.loads(meta[METADATA_MODEL_INFO_KEY])["parameters"] == 252219
     assert list(session.get_inputs()[0].shape[1:]) == [66, 200, 3]
-    assert json.loads((out / "config.json").read_text())["resolved"]["deletion_rate"] == 0.0
+    record = json.loads((out / "config.json").read_text())
+    assert record["resolved"]["deletion_rate"] == 0.0
+    # the bundled recipe's settings, the command line's --epochs over its 2, all kept as a recipe in the record
+    assert record["recipe"]["augmentation"]["aug_loops"] == 8 and record["recipe"]["data"]["split"] == "random"
+    assert record["recipe"]["training"]["epochs"] == 1 and record["config"]["epochs"] == 1
 
 
 def test_row_stride_trains_as_a_log_of_every_nth_row(tmp_path: Path) -> None:

@@ -110,5 +110,5 @@ def test_place_puts_the_body_centre_and_straightens_the_wheels():
     for _ in range(30):
         car.step(1.0, 0.5)
     car.place(10.0, -4.0, math.radians(90), speed=5.0)
-    assert car.center == pytest.approx((10.0, -4.0))
+    assert car.centre == pytest.approx((10.0, -4.0))
     assert car.state.steer == 0.0 and car.state.speed == 5.0 and car.state.yaw == pytest.approx(math.pi / 2)

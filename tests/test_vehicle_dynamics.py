@@ -161,7 +161,7 @@ def test_place_puts_the_body_centre_and_rolls_straight():
     for _ in range(60):
         car.step(1.0, 0.5)
     car.place(10.0, -4.0, math.radians(90), speed=5.0)
-    assert car.center == pytest.approx((10.0, -4.0))
+    assert car.centre == pytest.approx((10.0, -4.0))
     s = car.state
     assert s.steer == 0.0 and s.speed == 5.0 and s.yaw_rate == 0.0 and s.slip == 0.0
 

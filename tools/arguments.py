@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 
 from protocol import SpeedUnit
+from protocol.errors import BadValue
 
 
 def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
     """``--behavior``, ``--arch``, ``--approach``: which of the paper's training pipelines."""
-    from models.training.behavior import Approach, Arch, Behavior
+    from models.data.behavior import Approach, Arch, Behavior
     from models.training.train_config import TrainConfig
 
     parser.add_argument("--behavior", choices=[b.value for b in Behavior], default=TrainConfig.behavior,
@@ -47,48 +48,13 @@ def smooth_alpha(args: argparse.Namespace) -> float | None:
         raise CommandError(f"--smooth: {exc}") from None
 
 
-#: A documented region of interest for real Unity recordings with the car's bonnet in view: rows 64..136 of
-#: the 320x160 frame drop the sky and far scenery above and the bonnet (from row ~137 down) below.
-BONNET_CROP = (64, 136)
-
-
-def add_preprocess_arguments(parser: argparse.ArgumentParser) -> None:
-    """Crop (carried in the model's contract) and brightness-augmentation strength, for train and previews."""
-    from drive_server.contract import DECODE_REDUCTIONS
-    from models.training.train_config import SCALE_BRIGHTNESS_RANGE, TrainConfig
-
-    parser.add_argument("--crop-top", type=int, default=TrainConfig.crop_top, metavar="ROW",
-                        help="first row of the 320x160 frame the network sees (default: the approach's, 0 for ours, "
-                             f"60 for nvidia; real Unity recordings with the bonnet in view: {BONNET_CROP[0]})")
-    parser.add_argument("--crop-bottom", type=int, default=TrainConfig.crop_bottom, metavar="ROW",
-                        help="row after the last one the network sees (default: the approach's, 160; with the "
-                             f"bonnet in view: {BONNET_CROP[1]})")
-    parser.add_argument("--decode-reduce", type=int, choices=DECODE_REDUCTIONS, default=TrainConfig.decode_reduce,
-                        metavar="N", help="decode camera frames at 1/N size, in training and in the drive server (the "
-                        "model's contract says so): 2 halves the decode and resize cost even where the crop then has "
-                        "fewer rows than the network; 0: the largest that keeps the network's resolution "
-                        "(default %(default)s)")
-    parser.add_argument("--brightness-mode", choices=("add", "scale"), default=TrainConfig.brightness_mode,
-                        help="add: the paper's p + beta (grey levels); scale: p * (1 + beta), relative to the frame's "
-                             "own brightness, so dark frames are not blacked out")
-    parser.add_argument("--brightness-range", type=float, default=TrainConfig.brightness_range, metavar="R",
-                        help="beta ~ U(-R, R) (default: 100 grey levels for add, as in the paper; 50 for nvidia; "
-                             f"{SCALE_BRIGHTNESS_RANGE} for scale)")
-
-
-def preprocess_options(args: argparse.Namespace) -> dict:
-    """The ``TrainConfig`` fields set by :func:`add_preprocess_arguments`."""
-    return {k: getattr(args, k) for k in ("crop_top", "crop_bottom", "decode_reduce", "brightness_mode",
-                                          "brightness_range")}
-
-
 def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
     """``"5mph"``, ``"8 kmh"``, ``"8km/h"`` or a bare number (in ``default_unit``) -> (value, unit)."""
     import re
 
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*(mph|kmh|km/h)?\s*", str(text).lower())
     if not m:
-        raise ValueError(f"--min-speed {text!r}: give a number with an optional unit, e.g. 5mph or 8kmh")
+        raise BadValue(f"--min-speed {text!r}: give a number with an optional unit, e.g. 5mph or 8kmh")
     unit = (m.group(2) or default_unit).replace("km/h", "kmh")
     return float(m.group(1)), unit
 
@@ -115,16 +81,34 @@ def add_vehicle_argument(parser: argparse.ArgumentParser, default: str) -> None:
                              "(default %(default)s)")
 
 
-def add_yaw_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--yaw-aug/--yaw-range/--yaw-gain``: the turned-camera augmentation (rbc train, rbc augment-preview)."""
-    from models.training.train_config import TrainConfig
+class MovedToRecipe(argparse.Action):
+    """A flag whose setting now lives in recipe files: still recognised, so an old command line stops with one
+    line saying where the setting went instead of argparse's "unrecognized arguments"."""
 
-    parser.add_argument("--yaw-aug", type=float, default=TrainConfig.yaw_aug, metavar="P",
-                        help="share of samples seen from the car turned by psi ~ U(-R, R) degrees (an exact "
-                             "re-projection for the real simulator's camera), labelled theta - G psi: teaches the "
-                             "heading feedback a closed loop needs; not in the paper (default %(default)s: off)")
-    parser.add_argument("--yaw-range", type=float, default=TrainConfig.yaw_range, metavar="R",
-                        help="largest turn of --yaw-aug, degrees (default %(default)s)")
-    parser.add_argument("--yaw-gain", type=float, default=TrainConfig.yaw_gain, metavar="G",
-                        help="how much of a turn --yaw-aug's label steers back at once (default %(default)s: "
-                             "all of it, aiming along the road again)")
+    def __init__(self, option_strings: list[str], dest: str, where: str, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs="?", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        self.where = where
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        parser.exit(2, f"{parser.prog}: error: {option_string} {self.where}\n")
+
+
+def add_moved_to_recipe_flags(parser: argparse.ArgumentParser) -> None:
+    """Every recipe key as a hidden flag (``--edge-gain`` for ``[augmentation] edge_gain``, and the old names of
+    renamed and removed ones) that exits 2 with one line saying where it went; flags the parser has stay its own."""
+    from models.training.recipe import SECTION_OF
+    from models.training.train_config import REMOVED, RENAMED
+
+    command = parser.prog
+    moved = {key: f"set [{section}] {key}" for key, section in SECTION_OF.items()}
+    moved |= {old: f"set [{SECTION_OF[new]}] {new}" for old, new in RENAMED.items()}
+    moved["min_speed"] = "set [data] min_speed and min_speed_unit (e.g. 5.0 and \"mph\")"
+    for key, where in moved.items():
+        flag = "--" + key.replace("_", "-")
+        if flag not in parser._option_string_actions:
+            parser.add_argument(flag, action=MovedToRecipe, where=f"moved into recipes: {where} in a recipe file "
+                                f"({command} --recipe FILE; rbc train --recipe unity --print shows one)")
+    for key in REMOVED:
+        parser.add_argument("--" + key.replace("_", "-"), action=MovedToRecipe,
+                            where="was removed: it was measured useless (docs/recordings.md)")

@@ -25,7 +25,7 @@ from tools.errors import is_user_error, one_line, remove_new_empty_outputs, snap
 #: Options of ``rbc`` itself, allowed before the subcommand.
 GLOBAL_FLAGS = ("-v", "--verbose", "-h", "--help", "--version")
 #: The packages of each optional extra (as in pyproject.toml): checked before a command that needs them runs.
-EXTRAS = {"train": ("torch", "onnx", "matplotlib", "tqdm"), "plots": ("matplotlib",)}
+EXTRAS = {"train": ("torch", "onnx", "matplotlib", "tqdm"), "plots": ("matplotlib",), "onnx": ("onnx",)}
 
 
 @dataclass(frozen=True)
@@ -62,13 +62,14 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "open-loop scores of models on a recorded driving log (e.g. real Unity frames)"),
     Subcommand("import-peer", "tools.commands.import_peer", "import a peer's Keras 1 PilotNet .h5 as ONNX", "train"),
     Subcommand("mirror", "tools.commands.mirror",
-               "an ONNX model answering (f(x) - f(mirror x)) / 2: its left-right lean cancelled", "train"),
+               "an ONNX model answering (f(x) - f(mirror x)) / 2: its left-right lean cancelled", "onnx"),
     Subcommand("ensemble", "tools.commands.ensemble",
-               "several ONNX models (e.g. one recipe, several seeds) averaged into one file", "train"),
+               "several ONNX models (e.g. one recipe, several seeds) averaged into one file", "onnx"),
     Subcommand("drive-log", "tools.commands.drive_log",
                "closed loop on a recorded real drive: the model sees re-projected recorded frames (DAVE-2)"),
     Subcommand("world", "tools.commands.world", "write procedural worlds (track files) or a contact sheet of them"),
     Subcommand("sim-bench", "tools.commands.sim_bench", "frames/s of the headless renderer and lap wall time"),
+    Subcommand("env-bench", "tools.commands.env_bench", "steps/s of the Gymnasium environment rbc/Drive-v0 per core"),
     Subcommand("train-bench", "tools.commands.train_bench", "augmentation and training throughput; projected paper run",
                "train"),
     Subcommand("model-card", "tools.commands.model_card", "write the model card of a bundled model from its run"),

@@ -2,8 +2,9 @@
 
 Bad data, a bad track, a bad model, a missing file, a permission problem, a full disk or a missing
 extra is the user's input, not a bug: it gets ``rbc COMMAND: error: ...`` (and a hint) on stderr
-and exit code 2, never a traceback (``rbc -v`` shows the traceback). Anything else is a bug and
-keeps its traceback.
+and exit code 2, never a traceback (``rbc -v`` shows the traceback). Ours say so by deriving from
+:class:`protocol.errors.UserError` (whose hint they carry); the file system's and the network's are
+OSErrors. Anything else, a bare ValueError included, is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -13,30 +14,17 @@ import shutil
 from collections.abc import Iterable
 from pathlib import Path
 
-#: Packages of ours whose exceptions describe bad input (their messages are written for users).
-OUR_PACKAGES = ("protocol", "drive_server", "models", "tools")
+from protocol.errors import UserError
 
 
-class CommandError(Exception):
+class CommandError(UserError):
     """Raised by a command for a problem it has already described in words (message, hint)."""
-
-    def __init__(self, message: str, hint: str = "") -> None:
-        super().__init__(message)
-        self.hint = hint
 
 
 def _hint_for(exc: BaseException) -> str:
-    name = type(exc).__name__
-    if isinstance(exc, CommandError):
+    """The exception's own hint; for the file system's and the network's errors, one by their errno."""
+    if isinstance(exc, UserError):
         return exc.hint
-    if name == "DataLogError":
-        return "give a recording folder with driving_log.csv and IMG/, as rbc collect or the simulator writes"
-    if name == "TrackError":
-        return "the track file format is in docs/formats.md (File formats: Track file)"
-    if name in ("ModelError", "ContractError", "ExportError"):
-        return "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
-    if name in ("RunDirError", "OutputDirError"):
-        return ""  # their messages say what to do
     if isinstance(exc, OSError):
         if exc.errno == errno.ENOSPC:
             return "free some disk space, or write to another disk"
@@ -50,10 +38,9 @@ def _hint_for(exc: BaseException) -> str:
 
 
 def is_user_error(exc: BaseException) -> bool:
-    """Input problems (ours, file system, network, bad values) as opposed to bugs."""
-    if isinstance(exc, CommandError | OSError | ValueError | TimeoutError):
-        return True
-    return type(exc).__module__.split(".")[0] in OUR_PACKAGES  # our error types carry messages for users
+    """Input problems (ours: :class:`UserError`; the file system's and network's: OSError, TimeoutError,
+    ConnectionError) as opposed to bugs. A bare ValueError is a bug: numpy's say nothing a user could act on."""
+    return isinstance(exc, UserError | OSError)
 
 
 def one_line(command: str, exc: BaseException) -> str:

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from models.augmentation import geometry
+from protocol.camera import PITCH_DEG, SIDE_OFFSET_M, VFOV_DEG
 from protocol.facts import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG
 
 CENTER, LEFT, RIGHT = 0, 1, 2
@@ -31,7 +32,7 @@ class AugmentSpec:
     pan: float = 0.1
     tilt: float = 0.05
     shift: float = 0.0  # not in the paper (nvidia approach)
-    gamma: float = 0.95 / 10.0  # inter-camera distance / recovery distance (Eq. 4/5)
+    gamma: float = SIDE_OFFSET_M / 10.0  # inter-camera distance / recovery distance (Eq. 4/5)
     shadow_count: int = 4
     shadow_darkness: float = 0.65
     shadow_x: tuple[int, int] = (0, FRAME_WIDTH)
@@ -54,9 +55,9 @@ class AugmentSpec:
     # so the pull leaves their steering alone and acts where the car nears an edge (0: off)
     edge_gain: float = 0.0
     edge_margin_m: float = 1.5
-    side_camera_m: float = 0.95
-    camera_vfov_deg: float = 60.0  # the Unity camera's vertical field of view (design card)
-    camera_pitch_deg: float = 6.2  # measured on real side cameras (rbc drive-log --calibrate)
+    side_camera_m: float = SIDE_OFFSET_M
+    camera_vfov_deg: float = VFOV_DEG  # the real simulator's camera (protocol.camera)
+    camera_pitch_deg: float = PITCH_DEG
 
     @property
     def uses_side_cameras(self) -> bool:

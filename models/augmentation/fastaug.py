@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -36,16 +37,24 @@ from drive_server.contract import PreprocessContract
 from drive_server.preprocess import to_input_tensor
 from models.augmentation import geometry
 from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, AugParams, draw_params
-from models.data.framecache import FrameCache
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
 _SUBPIXEL_BITS = 4
 
 
+class CachedFrames(Protocol):
+    """What the augmenter reads of a frame cache (:class:`models.data.framecache.FrameCache`): said here, not
+    imported, because the data's batches use this augmenter (the data sits above the augmentation)."""
+
+    frames: np.ndarray  # (cameras, n, height, width, 3) uint8, the contract's colour
+    cameras: tuple[str, ...]
+    contract: PreprocessContract
+
+
 class FastAugmenter:
     """Applies ``AugParams`` to cached network-size frames, a batch at a time."""
 
-    def __init__(self, cache: FrameCache, spec: AugmentSpec) -> None:
+    def __init__(self, cache: CachedFrames, spec: AugmentSpec) -> None:
         self.cache = cache
         self.spec = spec
         c = cache.contract

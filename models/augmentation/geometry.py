@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from protocol.camera import intrinsics, pitch_matrix
+
 Matrix = np.ndarray  # (3, 3) float64
 
 
@@ -168,13 +170,12 @@ def yaw_pullbacks(width: int, height: int, yaw_rad: np.ndarray, vfov_deg: float,
 
     A pure rotation of the camera is an exact homography for everything in view, near or far (no depth
     needed): ``K R_pitch R_yaw R_pitch^T K^-1`` from a pixel of the turned view to the recorded frame,
-    the same map as the closed loop's view synthesis above the horizon (``tools.drivelog.camera``).
+    the same map as the closed loop's view synthesis above the horizon (``tools.drivelog.camera``); the pinhole
+    and pitch maths are :mod:`protocol.camera`'s.
     Returned as pullbacks in corner coordinates, like every map here (``(n, 3, 3)``, projective).
     """
-    f = (height / 2) / math.tan(math.radians(vfov_deg / 2))
-    k = np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
-    c, s = math.cos(math.radians(pitch_deg)), math.sin(math.radians(pitch_deg))
-    pitch = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    k = intrinsics(width, height, vfov_deg)
+    pitch = pitch_matrix(pitch_deg)
     a = np.asarray(yaw_rad, float)
     yaw = _stack(len(a))
     yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 2, 0], yaw[:, 2, 2] = np.cos(a), np.sin(a), -np.sin(a), np.cos(a)

@@ -12,11 +12,13 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from protocol.errors import BadValue
+
 
 def zero_steer_drop_count(d: int, deletion_rate: float) -> int:
     """Eq. 3: D = floor(d * lambda)."""
     if not 0.0 <= deletion_rate <= 1.0:
-        raise ValueError(f"deletion rate must be in [0, 1], got {deletion_rate}")
+        raise BadValue(f"deletion rate must be in [0, 1], got {deletion_rate}")
     return math.floor(d * deletion_rate + 1e-9)
 
 
@@ -58,13 +60,13 @@ def index_batches(steering: np.ndarray, deletion_rate: float, batch_size: int,
     paper's generator did (steps per epoch = ceil(n / batch) * loops, independent of balancing).
     """
     if len(steering) == 0:
-        raise ValueError("no training samples")
+        raise BadValue("no training samples")
     pending = np.empty(0, dtype=np.int64)
     while True:
         while len(pending) < batch_size:
             one_pass = balanced_pass(steering, deletion_rate, rng, groups)
             if len(one_pass) == 0:
-                raise ValueError("balancing leaves no training samples")
+                raise BadValue("balancing leaves no training samples")
             pending = np.concatenate([pending, one_pass])
         yield pending[:batch_size]
         pending = pending[batch_size:]

@@ -19,13 +19,13 @@ import numpy as np
 from drive_server.contract import PreprocessContract
 from drive_server.preprocess import frame_to_network_image, jpeg_reduction
 from protocol.datalog import Sample
-from protocol.errors import ProtocolError
+from protocol.errors import BadValue, ProtocolError
 from protocol.facts import CAMERAS
 from protocol.jpeg import read_jpeg_file
 
 log = logging.getLogger(__name__)
 
-class FrameError(ValueError):
+class FrameError(BadValue):
     """A frame file could not be decoded as a 320x160 image."""
 
 

@@ -1,6 +1,6 @@
 """The road file of a recording (``road_edges.csv`` beside its log): where the road's edge lines were in each
 centre frame, as ``rbc data road`` found them, so that training can label frames by where the car stood on
-the road (``rbc train --centre-gain``).
+the road (a recipe's ``centre_gain`` and ``edge_gain``).
 
 One row per centre frame: its file name, the left and right edge lines' lateral positions from the camera
 (m, + right) and whether that frame showed them itself (1) or took them from its neighbours (0).

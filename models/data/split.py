@@ -14,6 +14,8 @@ from enum import StrEnum
 
 import numpy as np
 
+from protocol.errors import BadValue
+
 VAL_FRACTION = 0.2
 
 
@@ -35,9 +37,9 @@ class SplitSpec:
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", SplitKind(self.kind))
         if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+            raise BadValue(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         if self.block_frames < 1 or self.gap_frames < 0:
-            raise ValueError(f"block frames must be >= 1 and gap frames >= 0, got {self.block_frames}, "
+            raise BadValue(f"block frames must be >= 1 and gap frames >= 0, got {self.block_frames}, "
                              f"{self.gap_frames}")
 
 
@@ -48,9 +50,9 @@ def split_indices(n: int, seed: int, val_fraction: float = VAL_FRACTION) -> tupl
     paper's Table 2 counts (12,101 -> 9,680 + 2,421).
     """
     if n < 2:
-        raise ValueError(f"need at least 2 samples to split, got {n}")
+        raise BadValue(f"need at least 2 samples to split, got {n}")
     if not 0.0 < val_fraction < 1.0:
-        raise ValueError(f"val_fraction must be in (0, 1), got {val_fraction}")
+        raise BadValue(f"val_fraction must be in (0, 1), got {val_fraction}")
     n_val = min(n - 1, max(1, math.ceil(n * val_fraction)))
     order = np.random.default_rng(seed).permutation(n)
     return np.sort(order[n_val:]), np.sort(order[:n_val])
@@ -65,7 +67,7 @@ def block_split(n: int, seed: int, spec: SplitSpec = SplitSpec()) -> tuple[np.nd
     gap (at most a quarter block) to a held-out block are dropped from both sets.
     """
     if n < 2:
-        raise ValueError(f"need at least 2 samples to split, got {n}")
+        raise BadValue(f"need at least 2 samples to split, got {n}")
     block = max(1, min(spec.block_frames, n // 5))
     gap = min(spec.gap_frames, block // 4)
     n_blocks = max(2, n // block)  # a short remainder joins the last block
@@ -80,7 +82,7 @@ def block_split(n: int, seed: int, spec: SplitSpec = SplitSpec()) -> tuple[np.nd
             near[max(0, e - gap + 1):min(n, e + 1 + gap)] = True
     train = np.flatnonzero(~is_val & ~near)
     if not len(train):
-        raise ValueError(f"no training frames left after holding out {n_val} of {n_blocks} blocks")
+        raise BadValue(f"no training frames left after holding out {n_val} of {n_blocks} blocks")
     return train, np.flatnonzero(is_val)
 
 
@@ -96,14 +98,14 @@ def recording_split(recording: np.ndarray, seed: int, spec: SplitSpec = SplitSpe
     ids = np.unique(recording)
     if held_out is None:
         if len(ids) < 2:
-            raise ValueError("--split recordings needs at least two recordings (repeat --data)")
+            raise BadValue("split \"recordings\" needs at least two recordings (repeat --data)")
         n_val = min(len(ids) - 1, max(1, round(len(ids) * spec.val_fraction)))
         chosen = np.random.default_rng([seed, 0x12EC]).choice(ids, size=n_val, replace=False)
     else:
         chosen = np.flatnonzero(held_out)
     is_val = np.isin(recording, chosen)
     if is_val.all() or not is_val.any():
-        raise ValueError("holding out recordings left no training or no validation samples")
+        raise BadValue("holding out recordings left no training or no validation samples")
     return np.flatnonzero(~is_val), np.flatnonzero(is_val)
 
 

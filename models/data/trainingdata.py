@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from models.data.behavior import Pipeline
 from models.data.framecache import FrameCache, build_cache
 from models.data.labels import centred_average
 from models.data.split import SplitKind, SplitSpec, make_split
-from models.training.behavior import Pipeline
 from protocol.datalog import DataLogError, DataSet, read_logs
 from protocol.units import SpeedUnit, to_kmh
 
@@ -28,15 +28,12 @@ class DataOptions:
     min_speed: float = 0.0  # rows recorded below this speed are dropped (0: none)
     min_speed_unit: SpeedUnit | str = SpeedUnit.MPH
     speed_unit: SpeedUnit | str = SpeedUnit.MPH  # unit of the log's speed column
-    smooth_frames: int = 0  # training labels: centred moving average over this many frames (0: as recorded)
+    label_smoothing_frames: int = 0  # training labels: centred moving average over this many frames (0: off)
     # every Nth row of the logs (1: all). Neighbouring frames at 15 Hz are near-copies, so a stride keeps the
     # roads and cuts the frame cache N-fold: PilotNet's 200x66 frames of 380,000 rows would need ~46 GB
     row_stride: int = 1
     # recordings held out whole as the validation set (implies the recordings split); the rest trains
     val_data: tuple[str, ...] = ()
-    balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
-    # training labels: the steering recorded this many frames later (drivers react a few frames after they see)
-    label_lag: int = 0
     # training labels: plus this much steering per metre that the road's middle lies to the side (read from each
     # recording's road file, rbc data road): drivers each hold a line of their own on a wide road, so the image
     # cannot say how far the car is from that line, only from the road's middle
@@ -92,15 +89,27 @@ class PreparedData:
                 f"{c['train']} training + {c['val']} validation ({self.split.kind.value} split{gap})")
 
 
-def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, options: DataOptions = DataOptions(),
-                 workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
+def split_logs(data: Sequence[Path | str], seed: int, options: DataOptions = DataOptions()
+               ) -> tuple[DataSet, np.ndarray, np.ndarray]:
+    """The logs read as training reads them and split in log order, before any frame is decoded or dropped:
+    (dataset, training positions, validation positions). Also how ``rbc drive-log --held-out-of`` finds the
+    stretches a run held out."""
     dataset = read_logs([*data, *options.val_data])
     if options.row_stride > 1:
         dataset = DataSet(dataset.samples[::options.row_stride], dataset.reports)
-    recording = recording_ids(dataset)
     held_out = None
     if options.val_data:
         held_out = np.arange(len(dataset.reports)) >= len(dataset.reports) - len(options.val_data)
+    train, val = make_split(len(dataset.samples), seed, options.split, recording_ids(dataset), held_out)
+    return dataset, train, val
+
+
+def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, options: DataOptions = DataOptions(),
+                 workers: int = 2, progress: Callable[[int, int], None] | None = None) -> PreparedData:
+    # split the log as recorded, then drop what is unusable: blocks stay stretches of real time, and runs with
+    # other filters (or crops) of the same data hold out the same stretches
+    dataset, train, val = split_logs(data, seed, options)
+    recording = recording_ids(dataset)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
     speeds = np.array([s.speed for s in dataset.samples], np.float64)
     slow = options.slow(speeds)
@@ -109,14 +118,11 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     if len(usable) < 2:
         raise DataLogError(f"only {len(usable)} samples with readable frames"
                            f"{' at or above the minimum speed' if slow.any() else ''} in {dataset.logs}")
-    # split the log as recorded, then drop what is unusable: blocks stay stretches of real time, and runs with
-    # other filters (or crops) of the same data hold out the same stretches
-    train, val = make_split(len(dataset.samples), seed, options.split, recording, held_out)
     keep = cache.valid & ~slow
     train, val = train[keep[train]], val[keep[val]]
     if not len(train) or not len(val):
         raise DataLogError(f"{len(train)} training and {len(val)} validation samples left in {dataset.logs}: "
-                           "record more, or lower --min-speed")
+                           "record more, or lower the recipe's [data] min_speed")
     steering = np.array([s.steering for s in dataset.samples], np.float32)
     sides = np.array([s.has_sides for s in dataset.samples], bool) & pipeline.augment.uses_side_cameras
     if pipeline.augment.uses_side_cameras and not sides.any():
@@ -128,10 +134,8 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
               "gap": int(len(usable) - len(train) - len(val)),
               "recordings": len(dataset.reports), "val_recordings": int(len(np.unique(recording[val])))}
     labels = None
-    if options.label_lag:
-        labels = lagged_labels(steering, recording, options.label_lag)
-    if options.smooth_frames > 1:
-        labels = smooth_labels(dataset, steering if labels is None else labels, options.smooth_frames,
+    if options.label_smoothing_frames > 1:
+        labels = smooth_labels(dataset, steering, options.label_smoothing_frames,
                                np.isin(np.arange(len(steering)), train))
     middles = None
     if options.centre_gain or options.road_middles:
@@ -177,18 +181,6 @@ def recording_ids(dataset: DataSet) -> np.ndarray:
     """Index into ``dataset.reports`` of each sample's log."""
     index = {r.log: i for i, r in enumerate(dataset.reports)}
     return np.array([index[s.log] for s in dataset.samples], np.int64)
-
-
-def lagged_labels(steering: np.ndarray, recording: np.ndarray, lag: int) -> np.ndarray:
-    """Each frame labelled with the steering recorded ``lag`` frames later in its own recording (the last
-    frames of a recording keep its last value). A driver steers a few frames after the picture that
-    called for it, more so with a mouse; the frame shows what the later steering answers."""
-    out = steering.copy()
-    for r in np.unique(recording):
-        idx = np.flatnonzero(recording == r)
-        shifted = np.concatenate([steering[idx][lag:], np.repeat(steering[idx][-1:], min(lag, len(idx)))])
-        out[idx] = shifted[:len(idx)]
-    return out
 
 
 def smooth_labels(dataset: DataSet, steering: np.ndarray, frames: int, use: np.ndarray) -> np.ndarray:

@@ -4,6 +4,15 @@ ONNX builder of random-weight test/benchmark models both build from (no torch, n
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
+
+
+class Arch(StrEnum):
+    """The networks' names (the keys of :data:`ARCHITECTURES`)."""
+
+    SHALLOW = "shallow"
+    PILOTNET = "pilotnet"
+    SHALLOW_WIDE = "shallow-wide"  # not in the paper: SHALLOW_WIDE below
 
 
 @dataclass(frozen=True)

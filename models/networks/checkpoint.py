@@ -11,11 +11,13 @@ import torch
 from torch import nn
 
 from drive_server import runrecords
-from models.training import runfiles
+from models.networks import runfiles
+from protocol.errors import UserError
 
 
-class RunDirError(RuntimeError):
-    """The run directory is in a state that does not fit the request (exists, or nothing to resume)."""
+class RunDirError(UserError, RuntimeError):
+    """The run directory is in a state that does not fit the request (exists, or nothing to resume); the
+    message says what to do."""
 
 
 @dataclass

@@ -11,8 +11,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from models.networks.architectures import ARCHITECTURES, PILOTNET, SHALLOW, Architecture
-from models.training.behavior import Arch
+from models.networks.architectures import ARCHITECTURES, PILOTNET, SHALLOW, Arch, Architecture
 
 
 def _init_glorot(module: nn.Module) -> None:

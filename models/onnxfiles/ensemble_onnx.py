@@ -21,11 +21,12 @@ from drive_server import runrecords
 from drive_server.contract import PreprocessContract
 from drive_server.smoothing import SERVING_KEY, serving_alpha
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
+from protocol.errors import BadValue
 
 TOLERANCE = 1e-4
 
 
-class EnsembleError(ValueError):
+class EnsembleError(BadValue):
     """The models cannot be averaged into one; the message is one line."""
 
 

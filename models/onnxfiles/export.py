@@ -24,6 +24,7 @@ from drive_server.preprocess import to_input_tensor
 from drive_server.smoothing import OFF
 from models.networks.nets import ContractInput
 from models.onnxfiles.onnx_metadata import set_model_metadata
+from protocol.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +34,10 @@ OPSET = 17
 TOLERANCE = 1e-4
 
 
-class ExportError(RuntimeError):
+class ExportError(UserError, RuntimeError):
     """The ONNX model does not reproduce the PyTorch model."""
+
+    hint = "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
 
 
 def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, Any], path: Path,

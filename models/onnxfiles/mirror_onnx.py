@@ -21,14 +21,15 @@ from onnx import helper, numpy_helper
 from drive_server import runrecords
 from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.smoothing import OFF
+from models.data.behavior import check_output_scale, keeps_lane
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
-from models.training.behavior import check_output_scale, keeps_lane
+from protocol.errors import BadValue
 
 TOLERANCE = 1e-4
 _PREFIX = "rbc_mirror_"
 
 
-class MirrorError(ValueError):
+class MirrorError(BadValue):
     """The model cannot be mirror-averaged; the message is one line."""
 
 

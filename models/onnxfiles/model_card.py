@@ -5,8 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from drive_server.runrecords import read_json
 from models.networks.architectures import ARCHITECTURES as TABLES
-from models.training.runfiles import CONFIG, HISTORY, read_history
+from models.networks.runfiles import CONFIG, HISTORY, read_history
 
 _NAMES = {"shallow": "The paper's shallow CNN", "pilotnet": "NVIDIA's PilotNet",
           "shallow-wide": "The shallow CNN, twice the width and filters"}
@@ -33,7 +34,7 @@ def _validation(cfg: dict, history: list[dict]) -> str:
 
 
 def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name: str) -> str:
-    cfg = json.loads((run_dir / CONFIG).read_text(encoding="utf-8"))
+    cfg = read_json(run_dir / CONFIG)
     history = read_history(run_dir / HISTORY)
     c, r = cfg["config"], cfg["resolved"]
     train_s = sum(h["seconds"] for h in history)

@@ -27,6 +27,7 @@ from torch import nn
 from drive_server.contract import PreprocessContract
 from drive_server.preprocess import frame_to_network_image
 from protocol.datalog import read_log
+from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 from protocol.rigfile import REAL_RIG
 
@@ -50,7 +51,7 @@ _R2YI, _G2YI, _B2YI, _B2UI, _R2VI = 4899, 9617, 1868, 8061, 14369
 _R2Y, _G2Y, _B2Y, _B2U, _R2V = (c / _ONE for c in (_R2YI, _G2YI, _B2YI, _B2UI, _R2VI))
 
 
-class PeerImportError(ValueError):
+class PeerImportError(BadValue):
     """The file is not the peer's Keras 1 model (message: one line for the user)."""
 
 

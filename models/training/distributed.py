@@ -16,6 +16,7 @@ import torch
 from torch import nn
 
 from models.data.batches import TrainingSet
+from protocol.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -23,7 +24,7 @@ log = logging.getLogger(__name__)
 RANK_SEED_STRIDE = 1_000_003
 
 
-class DistributedError(Exception):
+class DistributedError(UserError):
     """A multi-process run that cannot be set up as asked (its message says what to change)."""
 
 
@@ -90,7 +91,7 @@ def shard(data: TrainingSet, world: World) -> TrainingSet:
         return data
     if data.batch_size % world.size:
         raise DistributedError(f"batch size {data.batch_size} does not split over {world.size} processes: "
-                               "give a --batch-size divisible by --nproc_per_node")
+                               "give a recipe [training] batch_size divisible by --nproc_per_node")
     take = slice(world.rank, None, world.size)
     return replace(data, indices=data.indices[take], steering=data.steering[take], has_sides=data.has_sides[take],
                    batch_size=data.batch_size // world.size,

@@ -15,13 +15,14 @@ from torch import nn
 from drive_server import runrecords
 from drive_server.preprocess import to_input_tensor
 from models.augmentation.fastaug import training_contract
+from models.data.behavior import Pipeline
 from models.data.trainingdata import PreparedData
+from models.networks import runfiles
 from models.networks.checkpoint import State
 from models.networks.nets import MirrorAveraged, OutputScaled, count_parameters
 from models.onnxfiles.export import export_onnx
-from models.training import runfiles
-from models.training.behavior import Pipeline
 from models.training.metrics import metrics_by_group, steering_metrics
+from models.training.recipe import recipe_sections
 from models.training.train_config import TrainConfig
 from protocol.rigfile import data_rig
 
@@ -83,10 +84,10 @@ def finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tra
             "split": config.split, "export": config.export, "exported_epoch": exported_epoch,
             "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"], "camera_rig": data_rig(config.data),
             "mirror_average": config.mirror_average, "output_scale": config.output_scale,
-            "serve_smooth": config.serve_smooth}
+            "serve_smooth": config.serve_smoothing, "recipe": recipe_sections(config)}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = run_dir / runfiles.MODEL
-    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.serve_smooth)
+    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.serve_smoothing)
     record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
     record["result"] = {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
                         "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,

@@ -27,12 +27,12 @@ from torch import nn
 from drive_server import runrecords
 from models.augmentation.fastaug import FastAugmenter
 from models.data.batches import Prefetcher, TrainingSet, epoch_batches
+from models.data.behavior import Pipeline
 from models.data.trainingdata import PreparedData, prepare_data
+from models.networks import runfiles
 from models.networks.checkpoint import RunDirError, State, load_checkpoint, save_checkpoint
 from models.networks.nets import build_model, count_parameters
 from models.training import distributed as ddp
-from models.training import runfiles
-from models.training.behavior import Pipeline
 from models.training.run_export import TrainResult, finish, predict
 from models.training.train_config import TrainConfig
 from models.training.train_record import config_record
@@ -208,7 +208,7 @@ def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool, world: ddp
     if resume:
         if not stored_path.exists():
             raise RunDirError(f"{run_dir}: nothing to resume (no {runfiles.CONFIG})")
-        stored = TrainConfig.from_dict(json.loads(stored_path.read_text(encoding="utf-8"))["config"])
+        stored = TrainConfig.from_dict(json.loads(stored_path.read_text(encoding="utf-8"))["config"], str(stored_path))
         return replace(stored, out=str(run_dir), threads=config.threads, decode_workers=config.decode_workers,
                        progress=config.progress)
     if world.is_main and ((run_dir / runfiles.CHECKPOINT).exists() or (run_dir / runfiles.MODEL).exists()):

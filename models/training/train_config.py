@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -11,9 +11,7 @@ import numpy as np
 from drive_server.contract import ContractError, PreprocessContract
 from models.augmentation import geometry
 from models.augmentation.augment import AugmentSpec
-from models.data.split import SplitSpec
-from models.data.trainingdata import DataOptions
-from models.training.behavior import (
+from models.data.behavior import (
     AUGMENTATION_LOOPS,
     BATCH_SIZE,
     LEARNING_RATE,
@@ -22,14 +20,23 @@ from models.training.behavior import (
     keeps_lane,
     pipeline_for,
 )
+from models.data.split import SplitSpec
+from models.data.trainingdata import DataOptions
+from protocol.camera import SIDE_OFFSET_M as SIDE_CAMERA_OFFSET_M  # Eq. 4/5's numerator
+from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
-#: Lateral offset of the side cameras from the centre one, metres (the design card; Eq. 4/5's numerator).
-SIDE_CAMERA_OFFSET_M = 0.95
 #: Brightness range of ``brightness_mode="scale"`` when none is given: gain 1 +- 0.5.
 SCALE_BRIGHTNESS_RANGE = 0.5
 #: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
 LEGACY = {"split": "random", "export": "last"}
+#: Keys of stored runs renamed since (old -> new), so run configs written before still load.
+RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "serve_smoothing"}
+#: Knobs removed because they were measured useless (docs/recordings.md), with the value that did nothing: a stored
+#: run holding that value still loads, one holding another cannot be reproduced any more.
+REMOVED = {"label_lag": 0, "recovery_distance": None}
+EXPORTS = ("best", "last")
+BRIGHTNESS_MODES = ("add", "scale")
 
 
 def turned_edge_columns(augment: AugmentSpec, contract: PreprocessContract) -> int:
@@ -81,20 +88,16 @@ class TrainConfig:
     min_speed: float = 0.0  # rows recorded slower than this are dropped (0: keep all)
     min_speed_unit: str = "mph"
     speed_unit: str = "mph"  # unit of the log's speed column: mph (Udacity) or kmh (the paper's simulator)
-    smooth_labels: int = 0  # train on a centred moving average of the steering over N frames (0: as recorded)
+    label_smoothing_frames: int = 0  # train on a centred moving average of the steering over N frames (0: off)
     row_stride: int = 1  # train and validate on every Nth row of the logs (1: every row)
     val_data: list[str] = field(default_factory=list)  # recordings held out whole (implies split "recordings")
     balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
-    label_lag: int = 0  # train on the steering recorded this many frames after the frame
     # not in the paper: labels plus this much steering per metre towards the road's middle (rbc data road)
     centre_gain: float = 0.0
     # not in the paper: edge_gain steering per metre that a camera (each at its own offset) stands beyond
     # edge_margin metres from the road's middle, towards it (rbc data road; 0: off)
     edge_gain: float = 0.0
     edge_margin: float = 1.5
-    # side-camera label correction: the distance (m) in which a car 0.95 m off would be back (Eq. 4/5: gamma =
-    # 0.95 / this); None: the paper's 10 m. Shorter teaches a stronger pull back to the centre line
-    recovery_distance: float | None = None
     # not in the paper: the share of samples seen from the car turned by up to yaw_range degrees, labelled to
     # turn back (theta - yaw_gain * psi): the heading feedback a closed loop needs (0: off, the paper's)
     yaw_aug: float = 0.0
@@ -105,70 +108,82 @@ class TrainConfig:
     # not in the paper: the exported model's steering times this (models.networks.nets.OutputScaled; 1: as trained);
     # training is unchanged
     output_scale: float = 1.0
-    # how drive_server smooths each client's steering unless told otherwise (drive_server.smoothing; 1: off),
-    # written into the model's metadata
-    serve_smooth: float = 1.0
+    # how drive_server smooths each client's steering unless told otherwise: the weight of the new output
+    # (drive_server.smoothing; 1: off), written into the model's metadata
+    serve_smoothing: float = 1.0
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
     progress: bool = True
 
     def __post_init__(self) -> None:
-        if self.export not in ("best", "last"):
-            raise ValueError(f"export must be best or last, not {self.export!r}")
-        if self.brightness_mode not in ("add", "scale"):
-            raise ValueError(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
+        if self.export not in EXPORTS:
+            raise BadValue(f"export must be best or last, not {self.export!r}")
+        if self.brightness_mode not in BRIGHTNESS_MODES:
+            raise BadValue(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
         if self.val_data:
             self.split = "recordings"
-        if self.recovery_distance is not None and not 1.0 <= self.recovery_distance <= 100.0:
-            raise ValueError(f"recovery distance must be 1..100 m, got {self.recovery_distance}")
         if not 0.0 <= self.yaw_aug <= 1.0:
-            raise ValueError(f"yaw augmentation share must be 0..1, got {self.yaw_aug}")
+            raise BadValue(f"yaw augmentation share must be 0..1, got {self.yaw_aug}")
         if not 0.0 < self.yaw_range <= 30.0:
-            raise ValueError(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
+            raise BadValue(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
         if not 0.0 <= self.yaw_gain <= 5.0:
-            raise ValueError(f"yaw gain must be 0..5, got {self.yaw_gain}")
+            raise BadValue(f"yaw gain must be 0..5, got {self.yaw_gain}")
         if self.mirror_average and keeps_lane(self.behavior):
-            raise ValueError(f"--mirror-average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
-                             f"left-right asymmetric task (trained without flips); the average would steer it to the "
-                             f"road's middle")
+            raise BadValue(f"mirror_average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
+                           f"left-right asymmetric task (trained without flips); the average would steer it to the "
+                           f"road's middle")
         check_output_scale(self.output_scale)
-        if not 0.0 < self.serve_smooth <= 1.0:
-            raise ValueError(f"serve smoothing must be above 0 and at most 1 (1: off), got {self.serve_smooth}")
+        if not 0.0 < self.serve_smoothing <= 1.0:
+            raise BadValue(f"serve smoothing must be above 0 and at most 1 (1: off), got {self.serve_smoothing}")
         if not 0.0 <= self.centre_gain <= 1.0:
-            raise ValueError(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
+            raise BadValue(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
         if not 0.0 <= self.edge_gain <= 1.0:
-            raise ValueError(f"edge gain must be 0..1 steering per metre, got {self.edge_gain}")
+            raise BadValue(f"edge gain must be 0..1 steering per metre, got {self.edge_gain}")
         if not 0.0 <= self.edge_margin <= 10.0:
-            raise ValueError(f"edge margin must be 0..10 m, got {self.edge_margin}")
-        if not 0 <= self.label_lag <= 100:
-            raise ValueError(f"label lag must be 0..100 frames, got {self.label_lag}")
+            raise BadValue(f"edge margin must be 0..10 m, got {self.edge_margin}")
+        if not 0 <= self.label_smoothing_frames <= 1000:
+            raise BadValue(f"label smoothing must be 0..1000 frames, got {self.label_smoothing_frames}")
         if not 1 <= self.row_stride <= 1000:
-            raise ValueError(f"row stride must be 1..1000, got {self.row_stride}")
+            raise BadValue(f"row stride must be 1..1000, got {self.row_stride}")
         if self.min_speed < 0:
-            raise ValueError(f"min speed must be >= 0, got {self.min_speed}")
+            raise BadValue(f"min speed must be >= 0, got {self.min_speed}")
         if self.brightness_range is not None and self.brightness_range < 0:
-            raise ValueError(f"brightness range must be >= 0, got {self.brightness_range}")
+            raise BadValue(f"brightness range must be >= 0, got {self.brightness_range}")
         self.split_spec()  # validates the split settings
         try:
             self.pipeline()
-        except ContractError as exc:  # said in the flags' words, not as a broken model file
-            raise ValueError(f"--crop-top/--crop-bottom (with the {self.approach} approach's defaults for what is "
-                             f"not given): {exc}") from None
+        except ContractError as exc:  # said in the recipe's words, not as a broken model file
+            raise BadValue(f"crop_top/crop_bottom (with the {self.approach} approach's defaults for what is "
+                           f"not given): {exc}") from None
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        known = set(cls.__dataclass_fields__)
-        values = {**LEGACY, **{k: v for k, v in data.items() if k in known}}
+    def from_dict(cls, data: dict[str, Any], source: str = "stored config") -> TrainConfig:
+        """A stored run's config (``config.json``; ``source`` names it in errors): a key this version does not know
+        is refused, not dropped, since the run it describes would not be the one rebuilt; old names and removed
+        knobs at the value that did nothing still load."""
+        known = [f.name for f in fields(cls)]
+        values: dict[str, Any] = dict(LEGACY)
+        for key, value in data.items():
+            key = RENAMED.get(key, key)
+            if key in REMOVED:
+                if value != REMOVED[key]:
+                    raise BadValue(f"{source}: {key} = {value!r}: that knob was removed (measured useless, "
+                                   f"docs/recordings.md), so this version cannot rebuild the run")
+            elif key not in known:
+                raise BadValue(f"{source}: unknown key {key!r} (known: {', '.join(known)})")
+            else:
+                values[key] = value
         return cls(**values)
 
     def split_spec(self) -> SplitSpec:
         return SplitSpec(self.split, self.val_fraction, self.block_frames, self.gap_frames)
 
     def data_options(self) -> DataOptions:
-        return DataOptions(self.split_spec(), self.min_speed, self.min_speed_unit, self.speed_unit, self.smooth_labels,
-                           self.row_stride, tuple(self.val_data), self.balance_recordings, self.label_lag,
-                           self.centre_gain, self.edge_gain > 0)
+        """The data settings; fields named alike in both classes are copied by name, so none is forgotten."""
+        same = {f.name for f in fields(DataOptions)} & {f.name for f in fields(self)} - {"split", "val_data"}
+        return DataOptions(split=self.split_spec(), val_data=tuple(self.val_data), road_middles=self.edge_gain > 0,
+                           **{name: getattr(self, name) for name in same})
 
     def pipeline(self) -> Pipeline:
         """The behavior's pipeline with this run's crop and brightness settings applied."""
@@ -180,8 +195,6 @@ class TrainConfig:
         if brightness_range is None:
             brightness_range = SCALE_BRIGHTNESS_RANGE if self.brightness_mode == "scale" else p.augment.brightness_range
         augment = replace(p.augment, brightness_mode=self.brightness_mode, brightness_range=brightness_range)
-        if self.recovery_distance is not None:
-            augment = replace(augment, gamma=SIDE_CAMERA_OFFSET_M / self.recovery_distance)
         if self.yaw_aug > 0:
             augment = replace(augment, yaw=self.yaw_aug, yaw_range_deg=self.yaw_range, yaw_gain=self.yaw_gain)
             contract = replace(contract, blank_columns=turned_edge_columns(augment, contract))

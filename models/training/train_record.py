@@ -9,8 +9,9 @@ from typing import Any
 import torch
 
 from drive_server import runrecords
+from models.data.behavior import Pipeline
 from models.data.trainingdata import PreparedData
-from models.training.behavior import Pipeline
+from models.training.recipe import recipe_sections
 from models.training.train_config import TrainConfig
 
 
@@ -18,6 +19,7 @@ def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, e
                   steps: int, val_steps: int) -> dict[str, Any]:
     return {
         "config": asdict(config),
+        "recipe": recipe_sections(config),  # the same settings, resolved, as a recipe file holds them
         "resolved": {
             "epochs": epochs, "steps_per_epoch": steps,
             "validation_steps": val_steps,

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from protocol.datalog import read_log
+from protocol.errors import BadValue
 from tools.bench.fuzz import open_fds, rss_mib, settled_fds
 from tools.bench.soak_mix import REPLY_TIMEOUT_S, SoakMix, Tally
 from tools.wire.frames import SourceFrame
@@ -47,11 +48,11 @@ class SoakConfig:
 
     def __post_init__(self) -> None:
         if not self.duration_s > 0:
-            raise ValueError(f"--duration must be > 0 s, got {self.duration_s}")
+            raise BadValue(f"--duration must be > 0 s, got {self.duration_s}")
         if self.clients < 1:
-            raise ValueError(f"--clients must be >= 1, got {self.clients}")
+            raise BadValue(f"--clients must be >= 1, got {self.clients}")
         if not 0 < self.sample_s <= self.duration_s:
-            raise ValueError(f"--sample must be in (0, duration], got {self.sample_s}")
+            raise BadValue(f"--sample must be in (0, duration], got {self.sample_s}")
 
     def rates_hz(self) -> list[float]:
         if self.clients == 1:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from models.training.behavior import pipeline_for
+from models.data.behavior import pipeline_for
 
 PAPER_TRAIN_SAMPLES = 9680
 PAPER_TOTAL_SAMPLES = 12101

@@ -8,25 +8,29 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from tools.arguments import add_pipeline_arguments, add_preprocess_arguments, add_yaw_arguments
+from tools.arguments import add_moved_to_recipe_flags
+
+if TYPE_CHECKING:
+    from models.training.train_config import TrainConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", required=True, metavar="DIR", help="recording directory or log")
-    add_pipeline_arguments(parser)
-    add_preprocess_arguments(parser)
-    add_yaw_arguments(parser)
+    parser.add_argument("--recipe", metavar="FILE_OR_NAME",
+                        help="the training recipe whose crop, decode and augmentations to show: a file or a bundled "
+                             "name, as rbc train --recipe (default: rbc train's defaults)")
     parser.add_argument("--out", required=True, type=Path, help="PNG file to write")
     parser.add_argument("--n", type=int, default=16, help="number of samples")
     parser.add_argument("--seed", type=int, default=0, help="which samples and augmentations are drawn")
+    add_moved_to_recipe_flags(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.arguments import preprocess_options
+    from models.training.recipe import load_recipe
 
-    return _write_preview(args, preprocess_options(args) | {k: getattr(args, k) for k in ("yaw_aug", "yaw_range",
-                                                                                           "yaw_gain")})
+    return _write_preview(args, load_recipe(args.recipe))
 
 
 def _describe(params, i: int) -> str:
@@ -53,8 +57,8 @@ def _describe(params, i: int) -> str:
     return " ".join(parts) or "none"
 
 
-def _write_preview(args: argparse.Namespace, options: dict) -> int:
-    """``options``: the ``TrainConfig`` fields of the preview's crop, decode, brightness and turn flags."""
+def _write_preview(args: argparse.Namespace, config: TrainConfig) -> int:
+    """The preview of ``config``'s pipeline (crop, decode, brightness, turns) on ``args.data``."""
     import cv2
     import matplotlib
 
@@ -66,12 +70,10 @@ def _write_preview(args: argparse.Namespace, options: dict) -> int:
     from models.augmentation.augment import augment_reference, draw_params
     from models.augmentation.fastaug import FastAugmenter
     from models.data.framecache import build_cache, load_frame
-    from models.training.train_config import TrainConfig
     from protocol.datalog import read_logs
     from protocol.facts import CAMERAS
 
-    pipeline = TrainConfig(data=[], out="", behavior=args.behavior, arch=args.arch, approach=args.approach,
-                           **options).pipeline()
+    pipeline = config.pipeline()
     dataset = read_logs(args.data)
     rng = np.random.default_rng(args.seed)
     # prefer turning frames so the label corrections are visible, as the paper's figures do
@@ -106,7 +108,7 @@ def _write_preview(args: argparse.Namespace, options: dict) -> int:
     a, c = pipeline.augment, pipeline.contract
     bright = f"p + U(-{a.brightness_range:g}, {a.brightness_range:g})" if a.brightness_mode == "add" else \
         f"p x (1 + U(-{a.brightness_range:g}, {a.brightness_range:g}))"
-    fig.suptitle(f"{args.behavior} / {args.approach}: recorded label -> training label "
+    fig.suptitle(f"{config.behavior} / {config.approach}: recorded label -> training label "
                  f"(left: full-resolution reference, right: training input, rows {c.crop_top}-{c.crop_bottom}); "
                  f"brightness {bright}", fontsize=9)
     fig.tight_layout()

@@ -7,7 +7,7 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import write_text
+from drive_server.runrecords import read_json, write_text
 from tools.errors import CommandError
 from tools.evaluate.compare import build_table, evaluated_model, measure_latency, training_summary
 
@@ -34,7 +34,7 @@ def _table9(args: argparse.Namespace) -> int:
 
     summaries = {}
     for eval_dir in args.evals:
-        results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
+        results = read_json(eval_dir / "results.json")
         summaries[results["meta"]["behavior"]] = results["summary"]
     table = table9(summaries, with_paper=not args.no_paper)
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("give as many --label and --train-run as --eval (or none)")
     columns = []
     for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
-        results = json.loads((eval_dir / "results.json").read_text(encoding="utf-8"))
+        results = read_json(eval_dir / "results.json")
         model = evaluated_model(results, eval_dir)
         log.info("measuring the deployment latency of %s", model)
         training = training_summary(run_dir)

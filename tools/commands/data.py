@@ -16,6 +16,8 @@ from tools.realdata.recordings import TRACKS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from tools.drivelog.loop import LoopRules
+
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
                                 help="stats: a table per recording; clean: a cleaned log; road: the road's edges; "
                                      "fetch: the public recordings; "
@@ -62,8 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     road = sub.add_parser("road", formatter_class=formatter, help="find the road's edge lines in every centre frame",
                           description="write DIR/road_edges.csv: where the road's edge lines were in each centre frame "
-                                      "(what rbc drive-log's road rule uses, and rbc train --edge-gain and "
-                                      "--centre-gain read)")
+                                      "(what rbc drive-log's road rule uses, and a recipe's edge_gain and "
+                                      "centre_gain read)")
     road.add_argument("dirs", type=Path, nargs="*", metavar="DIR", help="recording folders (driving_log.csv + IMG/)")
     road.add_argument("--public", type=Path, metavar="ROOT",
                       help="also every lake recording of the public list under ROOT (where rbc data fetch put them): "
@@ -91,10 +93,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cv.add_argument("--track", choices=TRACKS, default=None, help="only the recordings of this track")
     cv.add_argument("--name", action="append", default=None, metavar="NAME", help="only this recording (repeat)")
     cv.add_argument("--no-closed-loop", action="store_true", help="open loop only (minutes instead of ~10)")
-    cv.add_argument("--lane", choices=("road", "path"), default="road",
+    cv.add_argument("--lane", choices=("road", "path"), default=LoopRules.lane,
                     help="closed loop: a take-over when the car leaves the road (road) or is --max-offset from the "
                          "driver's line (path), as rbc drive-log (default %(default)s)")
-    cv.add_argument("--max-offset", type=float, default=1.0, metavar="M",
+    cv.add_argument("--max-offset", type=float, default=LoopRules.max_offset_m, metavar="M",
                     help="with --lane path: metres off the recorded path at which a person takes over, as rbc "
                          "drive-log (default %(default)s)")
     cv.add_argument("--handback", type=float, default=None, metavar="S",
@@ -127,18 +129,16 @@ def _crossval(args: argparse.Namespace) -> int:
     recs = select(public_recordings(), args.track, args.name)
     if not recs:
         raise CommandError("no public recording among those named")
-    if not 1 <= args.workers <= 64 or not 0.05 <= args.max_offset <= 10:
-        raise CommandError("--workers must be 1..64 and --max-offset 0.05..10 metres")
-    try:
-        rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset,
-                          **({} if args.handback is None else {"handback_s": args.handback}))
-    except ValueError as exc:  # the rules check themselves (the hand-back time)
-        raise CommandError(f"--handback: {exc}") from None
+    if not 1 <= args.workers <= 64:
+        raise CommandError("--workers must be 1..64")
+    rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset,  # they check their own ranges
+                      **({} if args.handback is None else {"handback_s": args.handback}))
     missing = [str(p) for p in {model_for(args.models, r) for r in recs} | ({Path(args.peer)} if args.peer else set())
                if not p.is_file()]
     if missing:
         raise CommandError(f"no model at {', '.join(sorted(missing))}",
-                           f"train one per fold ({FOLD_FIELD} in --models): rbc train $(rbc data fold F --root ...)")
+                           f"train one per fold ({FOLD_FIELD} in --models): "
+                           "rbc train --recipe R $(rbc data fold F --root ...)")
     require_fetched(recs, args.root)
     closed = not args.no_closed_loop
     runs = [("folds", args.models)] + ([("peer", args.peer)] if args.peer else [])
@@ -167,8 +167,7 @@ def _road(args: argparse.Namespace) -> int:
     from protocol.datalog import read_log
     from tools.console import Progress
     from tools.drivelog.path import recorded_drive
-    from tools.drivelog.road import estimate_road
-    from tools.drivelog.yaw import wheelbase_or_default
+    from tools.drivelog.run import car_and_road
     from tools.errors import CommandError
     from tools.realdata.recordings import public_recordings, require_fetched, select
 
@@ -179,12 +178,7 @@ def _road(args: argparse.Namespace) -> int:
         raise CommandError("no recording to measure", "name recording folders, or --public ROOT for the public ones")
     for folder in dirs:
         log = recorded_drive(read_log(folder)[0], args.speed_unit)
-        wheelbase, _ = wheelbase_or_default(log)
-        progress = Progress(f"road {folder.name}", unit="frame")
-        try:
-            road = estimate_road(log, wheelbase, on_frame=progress)
-        finally:
-            progress.close()
+        _, _, road = car_and_road(log, bars=lambda _, name=folder.name: Progress(f"road {name}", unit="frame"))
         out = write_road_file(Path(folder) / ROAD_FILE, log.frames, road.left_m, road.right_m, road.measured)
         print(f"{folder}: {road.describe()} -> {out}")
     return 0
@@ -225,11 +219,11 @@ def _stats(args: argparse.Namespace) -> int:
 
 
 def _clean(args: argparse.Namespace) -> int:
+    from protocol.rows import parse_rows
     from protocol.units import to_kmh
     from tools.arguments import parse_speed
     from tools.errors import CommandError
     from tools.realdata.clean import CleanOptions, clean, describe
-    from tools.realdata.rows import parse_rows
 
     if args.session_gap <= 0:
         raise CommandError("--session-gap must be > 0")

@@ -5,13 +5,20 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from tools.arguments import add_smooth_argument, smooth_alpha
 from tools.errors import CommandError
 
+if TYPE_CHECKING:
+    from tools.drivelog.loop import LoopRules
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from tools.drivelog.loop import LoopRules
+    from tools.drivelog.track import TRACK_PROFILES
 
     p.add_argument("--data", type=Path, required=True, help="recording folder (driving_log.csv and IMG/)")
     who = p.add_mutually_exclusive_group()
@@ -41,6 +48,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "turn against the recorded steering)")
     p.add_argument("--speed-unit", choices=("mph", "kmh"), default="mph",
                    help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
+    p.add_argument("--track", choices=tuple(TRACK_PROFILES), default=None,
+                   help="how the road is found: the lake's yellow edge lines, the jungle's two lanes with a dashed "
+                        "centre line, the mountain's dark road between leaves and barriers (default: told from the "
+                        "asphalt's colour)")
+    part = p.add_mutually_exclusive_group()
+    part.add_argument("--rows", metavar="A-B[,C-D]",
+                      help="drive only these rows of the log (1-based, inclusive), each stretch from the recorded "
+                           "path; the road is still found on the whole recording")
+    part.add_argument("--held-out-of", type=Path, metavar="RUN_DIR",
+                      help="drive only the rows that this training run held out for validation (its config.json)")
     p.add_argument("--json", type=Path, help="write the result record here")
     p.add_argument("--strip", type=Path, default=Path("drive_log_out/strip.jpg"),
                    help="picture of synthesized views (take-overs framed in red)")
@@ -62,40 +79,43 @@ def run(args: argparse.Namespace) -> int:
         return _calibrate(samples, args.calibrate_rows)
     if args.model is None and args.baseline is None:
         raise CommandError("nobody to drive", "give --model M.onnx, --baseline recorded or --baseline zero")
-    if not 0.05 <= args.max_offset <= 10:
-        raise CommandError("--max-offset must be 0.05..10 metres")
-    if not 0 <= args.handback <= 60:
-        raise CommandError("--handback must be 0..60 seconds")
-    if not 0 <= args.speed_limit <= 300:
-        raise CommandError("--speed-limit must be 0..300 km/h (0: the recorded speed)")
     return _drive(args, samples)
+
+
+def _rules(args: argparse.Namespace) -> LoopRules:
+    """The loop's rules from the flags (they check their own ranges)."""
+    from tools.drivelog.loop import LoopRules
+
+    wheelbase = {} if args.wheelbase is None else {"wheelbase_m": args.wheelbase}
+    return LoopRules(lane=args.lane, max_offset_m=args.max_offset, views=args.views,
+                     speed_limit_kmh=args.speed_limit, handback_s=args.handback, **wheelbase)
 
 
 def _drive(args: argparse.Namespace, samples: list) -> int:
     from drive_server.runrecords import code_version, write_json
     from tools.console import Progress
-    from tools.drivelog.drivers import make_driver
-    from tools.drivelog.loop import LoopRules, drive
     from tools.drivelog.path import recorded_drive
     from tools.drivelog.pictures import write_offset_plot, write_strip
     from tools.drivelog.record import result_record
+    from tools.drivelog.run import drive_recording
 
+    rules = _rules(args)
     log = recorded_drive(samples, args.speed_unit)
-    driver, name = make_driver(log, args.model, args.baseline, args.steer_bias, smooth_alpha(args))
-    wheelbase, fit = _wheelbase(args, log)
-    rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset, views=args.views, wheelbase_m=wheelbase,
-                      speed_limit_kmh=args.speed_limit, handback_s=args.handback)
-    road = _road(log, rules) if rules.lane == "road" else None
-    progress = Progress("drive-log", unit="frame")
-    try:
-        result = drive(log, driver, rules, on_step=lambda j: progress(j + 1, len(log)), road=road)
-    finally:
-        progress.close()
-    record = result_record(result, args.data, len(log), name, args.steer_bias, road=road) | {
-        "wheelbase_fit": fit, "code_version": code_version()}
+    keep, rows = _chosen(args, samples)
+    bars = {"road": "road edges", "loop": "drive-log"}
+    run = drive_recording(log, rules, args.model, args.baseline, args.steer_bias, smooth_alpha(args),
+                          wheelbase_m=args.wheelbase, bars=lambda phase: Progress(bars[phase], unit="frame"),
+                          say=print, track=args.track, keep=keep)
+    result, name, road, fit = run.result, run.driver, run.road, run.wheelbase_fit
+    frames = len(log) if keep is None else int(keep.sum())
+    fitted = None if fit is None else {"wheelbase_m": round(fit.wheelbase_m, 3), "pairs": fit.pairs,
+                                       "r": round(fit.r, 3)}
+    record = result_record(result, args.data, frames, name, args.steer_bias, road=road) | {
+        "wheelbase_fit": fitted, "code_version": code_version(), "rows": rows}
     limit = f"at most {args.speed_limit:g} km/h" if args.speed_limit else "at the recorded speed"
-    print(f"drive-log {args.data}: {len(log)} frames, {result.frames} steps, {result.driving_time_s:.0f} s driving "
-          f"{limit}, driver {name}")
+    part = "" if rows is None else f" (of {len(log)}: {rows})"
+    print(f"drive-log {args.data}: {frames} frames{part}, {result.frames} steps, {result.driving_time_s:.0f} s "
+          f"driving {limit}, driver {name}")
     print(f"degree of autonomy {result.eta:.1f} %  interventions {result.interventions}  "
           f"({record['seconds_per_takeover']:.1f} s of driving per take-over)  offset rms {result.offset_rms_m:.2f} m  "
           f"max {record['offset_max_m']:.2f} m")
@@ -111,38 +131,34 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     return 0
 
 
-def _road(log, rules):
-    """The road's edges in every frame, with progress and a one-line summary."""
-    from tools.console import Progress
-    from tools.drivelog.road import estimate_road
+def _chosen(args: argparse.Namespace, samples: list) -> tuple[np.ndarray | None, str | None]:
+    """(a flag per sample: drive it; what was chosen, for the record) from --rows or --held-out-of; (None, None):
+    every row."""
+    from tools.drivelog.rows import held_out_mask, parse_row_ranges, rows_mask
 
-    progress = Progress("road edges", unit="frame")
+    if args.rows is None and args.held_out_of is None:
+        return None, None
     try:
-        road = estimate_road(log, rules.wheelbase_m, on_frame=progress)
-    finally:
-        progress.close()
-    print(road.describe())
-    return road
+        if args.rows is not None:
+            keep, what = rows_mask(samples, parse_row_ranges(args.rows)), f"rows {args.rows}"
+        else:
+            keep, what = held_out_mask(samples, args.held_out_of), f"held out of {args.held_out_of}"
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    if not keep.any():
+        raise CommandError(f"{what}: no row of {args.data} is among them")
+    stretches = int(np.sum(np.diff(np.r_[0, keep.astype(np.int8)]) == 1))
+    return keep, f"{what}: {int(keep.sum())} frames in {stretches} stretches"
 
 
-def _wheelbase(args: argparse.Namespace, log) -> tuple[float, dict | None]:
-    """The car's effective wheelbase: given, or fitted to the recorded frames (default if the fit fails)."""
-    from tools.drivelog.yaw import wheelbase_or_default
-
-    if args.wheelbase is not None:
-        if not 1.0 <= args.wheelbase <= 20.0:
-            raise CommandError("--wheelbase must be 1..20 metres")
-        return args.wheelbase, None
-    wheelbase, fit = wheelbase_or_default(log)
-    if fit is None:
-        return wheelbase, None
-    print(f"car: effective wheelbase {fit.wheelbase_m:.2f} m, fitted on {fit.pairs} frame pairs "
-          f"(image turn against recorded steering: r {fit.r:.2f})")
-    return fit.wheelbase_m, {"wheelbase_m": round(fit.wheelbase_m, 3), "pairs": fit.pairs, "r": round(fit.r, 3)}
+#: ``--calibrate`` checks the re-projection by slope on this many times its rows: a steep stretch is a few
+#: rows in ten, and each of these costs a small search, not a SIFT fit.
+SLOPE_ROWS_PER_ROW = 5
 
 
 def _calibrate(samples: list, rows: int) -> int:
     from tools.drivelog.calibrate import fit_side, spread
+    from tools.drivelog.pitch import reprojection_by_slope
 
     chosen = spread(samples, rows)
     if not chosen:
@@ -153,4 +169,11 @@ def _calibrate(samples: list, rows: int) -> int:
         f = fit_side(chosen, side)
         print(f"{side:<6} {f.matches:>7} {f.pitch_deg:>9.2f} {f.offset_heights:>+8.3f} {f.yaw_deg:>+7.2f}  "
               f"{f.error_unmoved_px:.2f} -> {f.error_px:.2f}     {f.view_error_unmoved:.1f} -> {f.view_error:.1f}")
+    rows_by_slope = spread(samples, SLOPE_ROWS_PER_ROW * rows)
+    print(f"\nthe centre frame re-projected to each side camera's place against its real frame, {len(rows_by_slope)} "
+          "rows: correlation of the road rows (as it is / over flat ground / over the ground at the pitch the other "
+          "side measured), by how steep the ground ahead is (its pitch off the camera's)")
+    for b in reprojection_by_slope([(s.center, s.left, s.right) for s in rows_by_slope]):
+        print(f"  {b.low_deg:g}-{b.high_deg:g} deg: {b.frames:>4} rows  "
+              f"{b.unmoved:.3f} / {b.flat:.3f} / {b.pitched:.3f}")
     return 0

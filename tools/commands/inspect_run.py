@@ -8,7 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
-from models.training import runfiles
+from models.networks import runfiles
 from models.training.inspection import LAP_FRAMES, plot_activations, plot_histograms, plot_loss, plot_predictions
 from tools.errors import CommandError
 
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"{run_dir}: not a training run folder (no {runfiles.CONFIG})",
                            "give the --out folder of an rbc train run")
     record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
-    config = TrainConfig.from_dict(record["config"])
+    config = TrainConfig.from_dict(record["config"], str(run_dir / runfiles.CONFIG))
     pipeline = config.pipeline()  # with the run's crop: the frames the model was trained on
     data = prepare_data(args.data or config.data, pipeline, config.seed, config.data_options())
     out = run_dir / "inspect"

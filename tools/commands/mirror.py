@@ -1,5 +1,6 @@
 """``rbc mirror``: an existing ONNX model mirror-averaged, (f(x) - f(mirror x)) / 2, for models whose training run
-is gone (:mod:`models.onnxfiles.mirror_onnx`); ``rbc train --mirror-average`` does the same at export."""
+is gone (:mod:`models.onnxfiles.mirror_onnx`); a recipe's ``[export] mirror_average`` does the same at
+export."""
 
 from __future__ import annotations
 
@@ -16,9 +17,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="the mirror-averaged model to write (.onnx)")
     p.add_argument("--serve-smooth", type=float, default=1.0, metavar="ALPHA",
                    help="also ask drive_server to smooth each client's steering with this weight of the new output, "
-                        "as rbc train --serve-smooth (default %(default)s: off)")
+                        "as a recipe's [export] serve_smoothing (default %(default)s: off)")
     p.add_argument("--output-scale", type=float, default=1.0, metavar="S",
-                   help="the mirrored model answers S times the average, as rbc train --output-scale (0.1..2; "
+                   help="the mirrored model answers S times the average, as a recipe's [export] output_scale (0.1..2; "
                         "default %(default)s)")
 
 

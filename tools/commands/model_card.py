@@ -7,10 +7,9 @@ Used when (re)building ``models/pretrained``: ``rbc model-card RUN_DIR --behavio
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from drive_server.runrecords import write_text
+from drive_server.runrecords import read_json, write_text
 from models.onnxfiles.model_card import card
 from protocol.facts import BEHAVIORS
 
@@ -24,6 +23,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    text = card(a.run_dir, a.behavior, a.recipe, json.loads(a.sim_json.read_text()), a.out.with_suffix(".onnx").name)
+    text = card(a.run_dir, a.behavior, a.recipe, read_json(a.sim_json), a.out.with_suffix(".onnx").name)
     write_text(a.out, text)
     return 0

@@ -9,6 +9,7 @@ import argparse
 from pathlib import Path
 
 from drive_server.runrecords import code_version, write_json
+from protocol.errors import BadValue
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,12 +29,12 @@ def run(args: argparse.Namespace) -> int:
     from tools.realism.stats import frame_stats, gaps, overall_gap
 
     if args.frames < 2:
-        raise ValueError(f"--frames must be >= 2, got {args.frames}")
+        raise BadValue(f"--frames must be >= 2, got {args.frames}")
     sides = {}
     for side, folders in (("real", args.real), ("sim", args.sim)):
         images = [img for img in (load_rgb(p) for p in centre_frames(folders, args.frames)) if img is not None]
         if len(images) < 2:
-            raise ValueError(f"fewer than 2 decodable frames in the --{side} recordings")
+            raise BadValue(f"fewer than 2 decodable frames in the --{side} recordings")
         sides[side] = (images, [frame_stats(img) for img in images])
     (real, real_stats), (sim, sim_stats) = sides["real"], sides["sim"]
     found = gaps(real_stats, sim_stats)

@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 
 from drive_server.runrecords import code_version, file_sha256, write_json
+from protocol.errors import BadValue
 from tools.bench.fuzz_campaign import DEFAULT_LOG
 from tools.bench.soak import SoakConfig, check_recording
 from tools.wire.frames import log_frames, synthetic_frames
@@ -70,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     own_dir = args.record_dir is None
     record_dir = Path(tempfile.mkdtemp(prefix="rbc_soak_")) / "rec" if own_dir else args.record_dir
     if not own_dir and record_dir.exists() and any(record_dir.iterdir()):
-        raise ValueError(f"--record-dir {record_dir} is not empty (the soak counts the rows it recorded)")
+        raise BadValue(f"--record-dir {record_dir} is not empty (the soak counts the rows it recorded)")
     stats_json = record_dir.parent / f"{record_dir.name}.stats.json"
     server = ServerProcess(model, ["--log-every", "0", "--dashboard", "--record", str(record_dir),
                                    *args.server_args.split()], stats_json=stats_json)

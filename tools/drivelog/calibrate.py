@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from protocol.datalog import Sample
+from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ViewSynthesizer, view_homographies
 
@@ -85,7 +86,7 @@ def fit_side(samples: Sequence[Sample], side: str, camera: UnityCamera = DEFAULT
     """Fit pitch, offset and yaw of one side camera on the given rows (which must have side frames)."""
     rows = [s for s in samples if getattr(s, side) is not None]
     if not rows:
-        raise ValueError(f"no row has a {side} frame")
+        raise BadValue(f"no row has a {side} frame")
     pairs = [_matches(_grey(s.center), _grey(getattr(s, side))) for s in rows]
     sign = -1.0 if side == "left" else 1.0
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from protocol.camera import CAR_HALF_WIDTH_M
+from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ViewSynthesizer
 from tools.drivelog.path import WHEELBASE_M, RecordedDrive, advance, curvature
@@ -43,6 +45,15 @@ MOVING_MPS = 1.0
 MAX_STEPS_PER_FRAME = 40
 
 
+#: The ranges :class:`LoopRules` accepts: field -> (its command-line flag, lowest, highest, unit).
+RULE_RANGES: dict[str, tuple[str, float, float, str]] = {
+    "max_offset_m": ("--max-offset", 0.05, 10.0, "metres"),
+    "handback_s": ("--handback", 0.0, 60.0, "seconds"),
+    "speed_limit_kmh": ("--speed-limit", 0.0, 300.0, "km/h (0: the recorded speed)"),
+    "wheelbase_m": ("--wheelbase", 1.0, 20.0, "metres"),
+}
+
+
 @dataclass(frozen=True)
 class LoopRules:
     """What counts as leaving the lane, and the car. Distances in metres."""
@@ -51,7 +62,7 @@ class LoopRules:
     # than max_offset_m off the driver's own line (DAVE-2's 1 m, on roads whose lanes are about the car's width)
     lane: str = "road"
     max_offset_m: float = 1.0
-    half_width_m: float = 0.95  # the car, 1.9 m wide (design card)
+    half_width_m: float = CAR_HALF_WIDTH_M  # the car, 1.9 m wide (protocol.camera)
     # where the recorded driver was at the edge already, the car may still move this far towards it
     min_margin_m: float = 0.5
     views: str = "nearest"  # re-project the nearest of the three cameras ("centre": the centre camera only)
@@ -65,12 +76,16 @@ class LoopRules:
     handback_s: float = 6.0
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.handback_s <= 60.0:
-            raise ValueError(f"hand-back time must be 0..60 s, got {self.handback_s}")
+        """The one check of the rules, whichever command (``rbc drive-log``, ``rbc data crossval``) made them."""
+        for name, (flag, lo, hi, unit) in RULE_RANGES.items():
+            value = getattr(self, name)
+            if not lo <= value <= hi:
+                raise BadValue(f"{flag} must be {lo:g}..{hi:g} {unit}, got {value:g}")
         if self.lane not in ("road", "path"):
-            raise ValueError(f"unknown lane rule {self.lane!r} (road or path)")
+            raise BadValue(f"unknown lane rule {self.lane!r} (road or path)")
         if self.views not in ("nearest", "centre"):
-            raise ValueError(f"unknown views {self.views!r} (nearest or centre)")
+            raise BadValue(f"unknown views {self.views!r} (nearest or centre)")
+
 
 
 #: A driver: (synthesized full-size RGB view, index of the recorded frame shown) -> normalised steering.
@@ -141,15 +156,16 @@ def lane_limits(rules: LoopRules, road: RoadEdges | None, n: int) -> np.ndarray:
 
 
 def _view(synth: ViewSynthesizer, drive_log: RecordedDrive, i: int, e: float, psi: float, forward: float,
-          rules: LoopRules, camera: UnityCamera) -> np.ndarray:
-    """The view from offset ``e``: re-projected from the nearest recorded camera (see the module docstring)."""
+          rules: LoopRules, camera: UnityCamera, pitch_deg: float | None = None) -> np.ndarray:
+    """The view from offset ``e``: re-projected from the nearest recorded camera (see the module docstring), the
+    ground ahead at ``pitch_deg`` (None: the camera's)."""
     centre = read_jpeg_file(drive_log.frames[i])
     side = "left" if e < 0 else "right"
     source = drive_log.side_frame(i, side) if rules.views == "nearest" and abs(e) > camera.side_offset_m / 2 else None
     if source is None:
-        return synth.view(centre, e, psi, forward)
+        return synth.view(centre, e, psi, forward, pitch_deg=pitch_deg)
     moved = e + camera.side_offset_m if side == "left" else e - camera.side_offset_m
-    return synth.view(read_jpeg_file(source), moved, psi, forward, bonnet=centre)
+    return synth.view(read_jpeg_file(source), moved, psi, forward, bonnet=centre, pitch_deg=pitch_deg)
 
 
 def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules(),
@@ -179,6 +195,8 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
     # the recorded path there, and that time is neither the driver's nor counted
     off_road = road.off_road if rules.lane == "road" and road is not None and road.off_road is not None \
         else np.zeros(n, bool)
+    # the ground's pitch in each frame where the road finder measured it (hills: tools.drivelog.pitch)
+    pitch = road.pitch_deg if road is not None else None
     moving_time = off_road_time = 0.0
     for session in np.unique(drive_log.session):
         steps = drive_log.session_range(int(session))
@@ -196,7 +214,8 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             # after a take-over, and where the recorded driver was off the road: the recorded path, the driver
             # is not asked
             by_person = clock <= person_until or bool(off_road[i])
-            view = None if by_person else _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera)
+            view = None if by_person else _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera,
+                                                None if pitch is None else float(pitch[i]))
             delta = float(drive_log.steering[i]) if view is None else float(driver(view, i))
             offsets.append(e)
             limits.append(frame_limits[i])

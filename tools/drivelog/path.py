@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from protocol.datalog import Sample
+from protocol.errors import BadValue
+from protocol.stamps import frame_time, session_ids
 from protocol.units import SpeedUnit, to_kmh
-from tools.realdata.stamps import frame_time, session_ids
 
 #: Largest steering angle of the simulator, degrees (normalised steering x this).
 MAX_STEER_DEG = 25.0
@@ -69,7 +70,7 @@ class RecordedDrive:
 def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUnit.MPH) -> RecordedDrive:
     """Rebuild the path of a log's centre frames (rows without a centre frame are not in ``samples``)."""
     if not samples:
-        raise ValueError("the log has no rows with a centre frame")
+        raise BadValue("the log has no rows with a centre frame")
     times = [frame_time(s.center) for s in samples]
     session = np.array(session_ids(times, SESSION_GAP_S), np.int64)
     dt = np.full(len(samples), DEFAULT_DT_S)

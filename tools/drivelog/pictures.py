@@ -10,6 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from protocol.errors import BadValue
 from tools.drivelog.loop import LoopResult
 from tools.sim.pictures.text import draw_text
 
@@ -21,7 +22,7 @@ def write_strip(result: LoopResult, path: Path, columns: int = 4) -> Path:
     """The kept views (RGB) in a grid, each labelled with its offset, heading and steering (BGR JPEG/PNG)."""
     shots = sorted(result.snapshots, key=lambda s: s.step)
     if not shots:
-        raise ValueError("no views were kept")
+        raise BadValue("no views were kept")
     h, w = shots[0].view.shape[:2]
     rows = -(-len(shots) // columns)
     sheet = np.zeros((rows * h, min(columns, len(shots)) * w, 3), np.uint8)

@@ -35,6 +35,6 @@ def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias
                       for t in result.takeovers],
         "rules": asdict(result.rules),
         "road": None if road is None else {"width_m": round(road.width_m, 3),
-                                           "measured_share": round(road.measured_share, 4)},
+                                           "measured_share": round(road.measured_share, 4), "track": road.track},
         "camera": asdict(camera),
     }

@@ -29,14 +29,16 @@ the road (hardly any asphalt straight ahead for 10 frames or more) :attr:`RoadEd
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from models.data.labels import centred_average
+from protocol.camera import CAR_HALF_WIDTH_M
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
 from tools.drivelog.path import RecordedDrive, curvature
+from tools.drivelog.pitch import ground_pitch
 from tools.drivelog.road_view import (
     asphalt_ahead,
     asphalt_colour,
@@ -44,9 +46,13 @@ from tools.drivelog.road_view import (
     frame_edges,
     top_down,
 )
+from tools.drivelog.track import detect_track, profile
 
 #: Running median over frames (odd).
 MEDIAN_FRAMES = 9
+#: Frames (evenly spread) whose asphalt colour tells the track where none is given: the asphalt is the same
+#: colour all along a recording, and the frames are read again anyway.
+DETECT_FRAMES = 200
 #: Road width assumed where a recording shows no road at all (m; the lake road between its lines).
 DEFAULT_WIDTH_M = 9.0
 #: Edge lines found more than this closer together than the recording's road width (m): one of them is false
@@ -57,8 +63,6 @@ WIDTH_TOLERANCE_M = 1.0
 #: asphalt's chroma for at least this many frames running (onto the grass, the dirt): no road to keep to.
 OFF_ROAD_SHARE = 0.3
 OFF_ROAD_FRAMES = 10
-#: Half the recorded car's width (m; the design card's 1.9 m car).
-CAR_HALF_WIDTH_M = 0.95
 #: Frames either side whose edges vote on where the road's middle is, when a frame's own edges disagree.
 CONSENSUS_HALF_FRAMES = 15
 
@@ -75,6 +79,10 @@ class RoadEdges:
     width_m: float
     # per frame: the recorded driver was off the road there (OFF_ROAD_SHARE); None: not looked at
     off_road: np.ndarray | None = None
+    track: str = "lake"  # the track profile the road was found with (tools.drivelog.track)
+    # per frame: the pitch (deg) of the ground ahead the road was seen with (tools.drivelog.pitch); None: the
+    # camera's calibrated pitch throughout
+    pitch_deg: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.left_m)
@@ -88,7 +96,7 @@ class RoadEdges:
         driver = -(self.left_m + self.right_m) / 2  # the driver from the road's middle, + right
         median = float(np.median(driver))
         off = int(np.sum(self.off_road)) if self.off_road is not None else 0
-        return (f"road {self.width_m:.1f} m wide between its edge lines (median), seen in "
+        return (f"{self.track} road {self.width_m:.1f} m wide between its edges (median), seen in "
                 f"{100 * self.measured_share:.0f} % of {len(self)} frames (the others take it from their "
                 f"neighbours); the driver {abs(median):.1f} m {'right' if median > 0 else 'left'} of its middle "
                 f"(median; 5-95 %: {np.percentile(driver, 5):+.1f} .. {np.percentile(driver, 95):+.1f} m)"
@@ -114,19 +122,31 @@ def _fill(values: np.ndarray, fallback: float) -> np.ndarray:
 
 
 def estimate_road(drive: RecordedDrive, wheelbase_m: float, camera: UnityCamera = DEFAULT_CAMERA,
-                  on_frame: Callable[[int, int], None] | None = None) -> RoadEdges:
+                  on_frame: Callable[[int, int], None] | None = None, track: str | None = None) -> RoadEdges:
     """The road's edge lines in every centre frame of ``drive`` (one pass over the frames; ``on_frame(done,
-    total)`` after each)."""
+    total)`` after each), by the profile of ``track`` (None: the track told from the asphalt's colour)."""
     kappa = curvature(centred_average(drive.steering, 9), wheelbase_m)
+    n = len(drive)
+    if track is None:  # told from a sample of the frames: the asphalt's colour is the recording's throughout
+        sample = np.linspace(0, n - 1, min(n, DETECT_FRAMES)).astype(int)
+        track = detect_track(asphalt_colour([top_down(read_jpeg_file(drive.frames[i]), float(kappa[i]), camera)
+                                             for i in sample]).median)
+    chosen = profile(track, None)
+    passes = 2 if chosen.ground_pitch else 1
+    pitch = None
+    if chosen.ground_pitch:
+        pitch = ground_pitch(drive.frames, drive.left_frames, drive.right_frames, drive.session, camera,
+                             on_frame=None if on_frame is None else lambda done, _: on_frame(done, passes * n))
     views = []
     for i, path in enumerate(drive.frames):
-        views.append(top_down(read_jpeg_file(path), float(kappa[i]), camera))
+        seen_by = camera if pitch is None else replace(camera, pitch_deg=float(pitch[i]))
+        views.append(top_down(read_jpeg_file(path), float(kappa[i]), seen_by))
         if on_frame:
-            on_frame(i + 1, len(drive))
-    median, spread = asphalt_colour(views)
-    raw = np.array([(np.nan, np.nan) if bricks_ahead(v, median) else frame_edges(v, median, spread)
+            on_frame((passes - 1) * n + i + 1, passes * n)
+    asphalt = asphalt_colour(views, shade=chosen.shade)
+    raw = np.array([(np.nan, np.nan) if bricks_ahead(v, asphalt) else frame_edges(v, asphalt, chosen.line_gap_m)
                     for v in views]).reshape(-1, 2)
-    bare = np.array([asphalt_ahead(v, median, spread) < OFF_ROAD_SHARE for v in views], bool)
+    bare = np.array([asphalt_ahead(v, asphalt) < OFF_ROAD_SHARE for v in views], bool)
     both = np.isfinite(raw).all(axis=1)
     width = float(np.median(raw[both, 1] - raw[both, 0])) if both.any() else DEFAULT_WIDTH_M
     measured = np.isfinite(raw).any(axis=1)
@@ -139,7 +159,7 @@ def estimate_road(drive: RecordedDrive, wheelbase_m: float, camera: UnityCamera 
         out_left[sl] = _fill(_running_median(left, MEDIAN_FRAMES), -width / 2)
         out_right[sl] = _fill(_running_median(right, MEDIAN_FRAMES), width / 2)
         off_road[sl] = _long_runs(bare[sl], OFF_ROAD_FRAMES)
-    return RoadEdges(out_left, out_right, measured, width, off_road)
+    return RoadEdges(out_left, out_right, measured, width, off_road, chosen.name, pitch)
 
 
 def _long_runs(flags: np.ndarray, frames: int) -> np.ndarray:

@@ -12,6 +12,8 @@ they agree; a side seen alone counts only where the other side's road ran out of
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -47,6 +49,9 @@ OFF_ROAD_CHROMA = 6.0
 #: its median a* (OpenCV's 8-bit Lab) this much above the asphalt's is not asphalt, and its edges are not
 #: measured (the lake's asphalt sits within 1 of its median in 90 % of frames, the bridge 5-7 above).
 BRICKS_REDDER = 4.0
+#: Shade on the road is learnt only where at least this share of the ground straight ahead, over the
+#: recording, is darker than the asphalt's lightness range with about its chroma (jungle: 10-20 %).
+SHADE_MIN_SHARE = 0.02
 _OUTSIDE = (255, 0, 255)  # magenta: pixels beyond the recorded frame (never asphalt)
 _OUTSIDE_LAB = cv2.cvtColor(np.uint8([[_OUTSIDE]]), cv2.COLOR_RGB2LAB)[0, 0].astype(np.float32)
 
@@ -70,21 +75,56 @@ def top_down(frame: np.ndarray, kappa: float, camera: UnityCamera = DEFAULT_CAME
     return cv2.cvtColor(view, cv2.COLOR_RGB2LAB)
 
 
-def asphalt_colour(views: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """(median, robust spread) of the Lab colour straight ahead over many frames."""
-    xs, zs = _grid()
-    rows = (zs >= ASPHALT_AHEAD_M[0]) & (zs <= ASPHALT_AHEAD_M[1])
-    cols = np.abs(xs) <= ASPHALT_HALF_WIDTH_M
-    patch = np.concatenate([v[rows][:, cols].reshape(-1, 3) for v in views]).astype(np.float32)
-    median = np.median(patch, axis=0)
-    spread = 1.4826 * np.median(np.abs(patch - median), axis=0)
+@dataclass(frozen=True)
+class Asphalt:
+    """A recording's asphalt colour in Lab: the median straight ahead and its robust spread, and where the track
+    has shade across the road (:attr:`tools.drivelog.track.TrackProfile.shade`) the same of the shaded asphalt."""
+
+    median: np.ndarray
+    spread: np.ndarray
+    shade: tuple[np.ndarray, np.ndarray] | None = None
+
+    def colours(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        return [(self.median, self.spread)] + ([self.shade] if self.shade is not None else [])
+
+
+def _robust(pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    median = np.median(pixels, axis=0)
+    spread = 1.4826 * np.median(np.abs(pixels - median), axis=0)
     return median, np.maximum(spread, SPREAD_FLOOR)
 
 
-def _asphalt(view: np.ndarray, median: np.ndarray, spread: np.ndarray) -> np.ndarray:
-    """Which pixels of a top-down view have the asphalt's colour (chroma and lightness each within theirs)."""
-    lab = (view.astype(np.float32) - median) / spread
-    return (np.abs(lab[..., 0]) < LIGHTNESS_DISTANCE) & (np.hypot(lab[..., 1], lab[..., 2]) < CHROMA_DISTANCE)
+def asphalt_colour(views: list[np.ndarray], shade: bool = False) -> Asphalt:
+    """The asphalt's colour straight ahead over many frames; with ``shade``, that of the shaded asphalt too: the
+    pixels darker than the asphalt's lightness range with about its chroma (:data:`OFF_ROAD_CHROMA`), if at
+    least :data:`SHADE_MIN_SHARE` of them."""
+    patch = np.concatenate([_ahead(v).reshape(-1, 3) for v in views]).astype(np.float32)
+    median, spread = _robust(patch)
+    if not shade:
+        return Asphalt(median, spread)
+    lab = (patch - median) / spread
+    dark = (lab[:, 0] < -LIGHTNESS_DISTANCE) & (np.hypot(lab[:, 1], lab[:, 2]) < OFF_ROAD_CHROMA)
+    return Asphalt(median, spread, _robust(patch[dark]) if dark.mean() >= SHADE_MIN_SHARE else None)
+
+
+def _asphalt(view: np.ndarray, asphalt: Asphalt) -> np.ndarray:
+    """Which pixels of a top-down view have the asphalt's colour (chroma and lightness each within theirs), in
+    the sun or in the shade."""
+    out = np.zeros(view.shape[:2], bool)
+    for median, spread in asphalt.colours():
+        lab = (view.astype(np.float32) - median) / spread
+        out |= (np.abs(lab[..., 0]) < LIGHTNESS_DISTANCE) & (np.hypot(lab[..., 1], lab[..., 2]) < CHROMA_DISTANCE)
+    return out
+
+
+def _asphalt_chroma(view: np.ndarray, asphalt: Asphalt, distance: float) -> np.ndarray:
+    """Which pixels have the asphalt's chroma (sunlit or shaded) within ``distance`` spreads, whatever their
+    lightness."""
+    out = np.zeros(view.shape[:2], bool)
+    for median, spread in asphalt.colours():
+        lab = (view.astype(np.float32) - median) / spread
+        out |= np.hypot(lab[..., 1], lab[..., 2]) < distance
+    return out
 
 
 def _ahead(view: np.ndarray) -> np.ndarray:
@@ -94,22 +134,32 @@ def _ahead(view: np.ndarray) -> np.ndarray:
     return view[rows][:, np.abs(xs) <= ASPHALT_HALF_WIDTH_M]
 
 
-def asphalt_ahead(view: np.ndarray, median: np.ndarray, spread: np.ndarray) -> float:
+def asphalt_ahead(view: np.ndarray, asphalt: Asphalt) -> float:
     """The share of the ground straight ahead with the asphalt's chroma (grass and dirt have not; the
     bridge's bricks and sunlit asphalt, lighter than the asphalt, have)."""
-    lab = (_ahead(view).astype(np.float32) - median) / spread
-    return float((np.hypot(lab[..., 1], lab[..., 2]) < OFF_ROAD_CHROMA).mean())
+    return float(_asphalt_chroma(_ahead(view), asphalt, OFF_ROAD_CHROMA).mean())
 
 
-def bricks_ahead(view: np.ndarray, median: np.ndarray) -> bool:
+def bricks_ahead(view: np.ndarray, asphalt: Asphalt) -> bool:
     """Whether the ground straight ahead is redder than the asphalt (the bridge's bricks, or dirt)."""
-    return float(np.median(_ahead(view)[..., 1])) - float(median[1]) >= BRICKS_REDDER
+    return float(np.median(_ahead(view)[..., 1])) - float(asphalt.median[1]) >= BRICKS_REDDER
 
 
-def frame_edges(view: np.ndarray, median: np.ndarray, spread: np.ndarray) -> tuple[float, float]:
-    """(left, right) edge positions of one top-down view (NaN where that side was not seen)."""
+def _close_lines(road: np.ndarray, view: np.ndarray, asphalt: Asphalt, gap_m: float) -> np.ndarray:
+    """``road`` with gaps up to ``gap_m`` wide in a row, between road pixels, made road where they have the
+    asphalt's chroma whatever their lightness: a white line inside the road (the jungle's dashed centre line)."""
+    cols = int(round(gap_m / COLUMN_M)) + 1
+    closed = cv2.morphologyEx(road.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((1, cols), np.uint8)) > 0
+    return road | (closed & _asphalt_chroma(view, asphalt, CHROMA_DISTANCE))
+
+
+def frame_edges(view: np.ndarray, asphalt: Asphalt, line_gap_m: float = 0.0) -> tuple[float, float]:
+    """(left, right) edge positions of one top-down view (NaN where that side was not seen); ``line_gap_m``: see
+    :func:`_close_lines` (0: none)."""
     xs, _ = _grid()
-    road = cv2.blur(_asphalt(view, median, spread).astype(np.float32), (SMOOTH_COLUMNS, 1)) > 0.5
+    road = cv2.blur(_asphalt(view, asphalt).astype(np.float32), (SMOOTH_COLUMNS, 1)) > 0.5
+    if line_gap_m > 0:
+        road = _close_lines(road, view, asphalt, line_gap_m)
     outside = np.all(view == _OUTSIDE_LAB, axis=-1)
     centre = len(xs) // 2
     lefts, rights = [], []

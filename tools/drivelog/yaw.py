@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
 from tools.drivelog.path import RecordedDrive, curvature
@@ -67,10 +68,10 @@ def fit_wheelbase(drive: RecordedDrive, camera: UnityCamera = DEFAULT_CAMERA, ma
     predicted = (drive.speed * drive.dt * curvature(drive.steering, 1.0))[idx][ok]
     measured = yaw[ok]
     if len(measured) < 20 or not np.any(predicted) or float(predicted @ measured) <= 0:
-        raise ValueError(f"only {len(measured)} usable frame pairs with turning: cannot fit the wheelbase")
+        raise BadValue(f"only {len(measured)} usable frame pairs with turning: cannot fit the wheelbase")
     wheelbase = float(predicted @ predicted / (predicted @ measured))
     if not PLAUSIBLE_M[0] <= wheelbase <= PLAUSIBLE_M[1]:
-        raise ValueError(f"fitted wheelbase {wheelbase:.1f} m is implausible: the frames do not follow the steering")
+        raise BadValue(f"fitted wheelbase {wheelbase:.1f} m is implausible: the frames do not follow the steering")
     r = float(np.corrcoef(predicted, measured)[0, 1])
     return WheelbaseFit(wheelbase, int(len(measured)), r)
 

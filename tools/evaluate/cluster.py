@@ -16,6 +16,7 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
+from protocol.errors import UserError
 from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, Runner, Task, pass_on, run_task
 from tools.ray_support import BACKENDS, INSTALL_HINT, import_ray, init_ray
@@ -27,8 +28,10 @@ __all__ = ["BACKENDS", "INSTALL_HINT", "RETRIES", "RayRunner", "RunLostError", "
 RETRIES = 3
 
 
-class RunLostError(Exception):
+class RunLostError(UserError):
     """A run failed on every attempt; the finished runs are in the journal (``--resume`` continues)."""
+
+    hint = "rbc eval --resume continues from the journal"
 
 
 class RayRunner(Runner):

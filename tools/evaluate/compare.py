@@ -13,8 +13,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import file_sha256
-from models.training.runfiles import CONFIG, HISTORY, read_history
+from drive_server.runrecords import file_sha256, read_json
+from models.networks.runfiles import CONFIG, HISTORY, read_history
 from tools.errors import CommandError
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
 from tools.evaluate.paper import PAPER_TABLE10, PAPER_TABLE10_RANGES
@@ -56,7 +56,7 @@ def training_summary(run_dir: Path | None) -> dict[str, Any]:
         return {}
     out: dict[str, Any] = {}
     if (run_dir / CONFIG).is_file():
-        stored = json.loads((run_dir / CONFIG).read_text(encoding="utf-8"))
+        stored = read_json(run_dir / CONFIG)
         cfg, resolved = stored.get("config", {}), stored.get("resolved", {})
         out.update(arch=cfg.get("arch"), approach=cfg.get("approach"), epochs=resolved.get("epochs"),
                    steps_per_epoch=resolved.get("steps_per_epoch"), batch_size=cfg.get("batch_size"),

@@ -6,7 +6,7 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import write_json, write_text
+from drive_server.runrecords import read_json, write_json, write_text
 from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, read_journal, spec_dict
 
@@ -29,7 +29,7 @@ def prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> d
     reuse: dict[str, dict] = {}
     if resume and journal.is_file():
         if identity_file.is_file():
-            earlier = json.loads(identity_file.read_text(encoding="utf-8"))
+            earlier = read_json(identity_file)
             if earlier != identity:
                 diff = sorted(k for k in identity if earlier.get(k) != identity[k])
                 raise CommandError(f"--resume: the journal in {out} was written for a different {', '.join(diff)}",

@@ -21,6 +21,7 @@ from drive_server.smoothing import OFF
 from models.data.labels import centred_average
 from models.training.metrics import steering_metrics
 from protocol.datalog import Sample, read_log
+from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 
 log = logging.getLogger(__name__)
@@ -93,5 +94,5 @@ def score_models(models: Sequence[Path], data: Path, camera: str = "center",
         log.warning("%s", report.summary())
     frames = camera_frames(samples, camera)
     if not frames:
-        raise ValueError(f"{data}: no row has a {camera} frame")
+        raise BadValue(f"{data}: no row has a {camera} frame")
     return [score_model(Path(m), frames, on_frame, smooth_frames, smooth) for m in models]

@@ -8,13 +8,13 @@ per-world eta, the worst world, and how many needed no intervention.
 
 from __future__ import annotations
 
-import json
 import statistics
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import file_sha256
+from drive_server.runrecords import file_sha256, read_json
+from protocol.errors import BadValue
 from tools.evaluate.experiments import experiment, is_autonomous, run_eta
 from tools.sim.track.files import track_text, write_track_file
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, generate_world, world_seed_range
@@ -28,9 +28,9 @@ def eval_world_seeds(count: int, first: int | None = None) -> list[int]:
     held_out = world_seed_range("eval")
     first = held_out.start if first is None else first
     if count < 1:
-        raise ValueError(f"--worlds must be >= 1, got {count}")
+        raise BadValue(f"--worlds must be >= 1, got {count}")
     if first not in held_out or first + count - 1 not in held_out:
-        raise ValueError(f"unseen worlds come from the evaluation seeds {held_out.start:,}-{held_out.stop - 1:,}, "
+        raise BadValue(f"unseen worlds come from the evaluation seeds {held_out.start:,}-{held_out.stop - 1:,}, "
                          f"not {first}-{first + count - 1} (training worlds would not be unseen)")
     return list(range(first, first + count))
 
@@ -47,7 +47,7 @@ def write_eval_worlds(out: Path, seeds: list[int], config: WorldGenConfig, resum
         path = folder / f"world-{seed}.json"
         doc = generate_world(seed, config)
         if resume and path.is_file() and path.read_text(encoding="utf-8") != track_text(doc):
-            raise ValueError(f"--resume: {path} is not the world this command generates (another --world-config "
+            raise BadValue(f"--resume: {path} is not the world this command generates (another --world-config "
                              "or generator version?); use a new --out, or drop --resume")
         paths[seed] = str(write_track_file(path, doc))
     return {"seeds": seeds, "seed_range": "eval", "generator_version": GENERATOR_VERSION,
@@ -56,7 +56,7 @@ def write_eval_worlds(out: Path, seeds: list[int], config: WorldGenConfig, resum
 
 
 def track_doc(path: str) -> dict[str, Any]:
-    return json.loads(Path(path).read_text(encoding="utf-8"))
+    return read_json(Path(path))
 
 
 def summarize_worlds(records: list[dict[str, Any]]) -> dict[str, Any]:

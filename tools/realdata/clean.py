@@ -15,10 +15,10 @@ from pathlib import Path
 
 from protocol.datalog import Sample, find_log, read_log
 from protocol.datalog_writer import LOG_NAME, format_number
+from protocol.rows import RowRange, row_numbers
+from protocol.stamps import frame_time, session_ids
 from protocol.units import to_kmh
 from tools.errors import CommandError
-from tools.realdata.rows import RowRange, row_numbers
-from tools.realdata.stamps import frame_time, session_ids
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ to the recipe, as one table: the README's and the model card's figures come from
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -100,18 +100,11 @@ def _closed_loop(data: Path, model: Path, rules: LoopRules | None,
                  smooth: float | None) -> tuple[float, int, float, float]:
     """eta, take-overs, seconds driven per take-over, and seconds the recorded driver was off the road."""
     from protocol.datalog import read_log
-    from tools.drivelog.drivers import make_driver
-    from tools.drivelog.loop import LoopRules, drive
     from tools.drivelog.path import recorded_drive
-    from tools.drivelog.road import estimate_road
-    from tools.drivelog.yaw import wheelbase_or_default
+    from tools.drivelog.run import drive_recording
 
     log = recorded_drive(read_log(data)[0])
-    wheelbase, _ = wheelbase_or_default(log)  # as rbc drive-log does
-    driver, _ = make_driver(log, model, None, smooth=smooth)
-    rules = replace(rules or LoopRules(), wheelbase_m=wheelbase)
-    road = estimate_road(log, wheelbase) if rules.lane == "road" else None
-    result = drive(log, driver, rules, snapshots=0, road=road)
+    result = drive_recording(log, rules, model, smooth=smooth, snapshots=0).result  # as rbc drive-log does
     return (round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2),
             round(result.off_road_s, 2))
 

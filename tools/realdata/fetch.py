@@ -17,9 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME
+from protocol.rows import keep_rows, numbered_lines, read_lines
 from tools.errors import CommandError
 from tools.realdata.recordings import PublicRecording
-from tools.realdata.rows import keep_rows, numbered_lines, read_lines
 
 DEFAULT_BASE_URL = "https://github.com"
 MARKER = ".done"

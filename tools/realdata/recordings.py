@@ -16,7 +16,8 @@ from importlib import resources
 from pathlib import Path
 
 from protocol.datalog_writer import LOG_NAME
-from tools.realdata.rows import RowRange, parse_rows
+from protocol.errors import BadValue
+from protocol.rows import RowRange, parse_rows
 
 MANIFEST = "public_recordings.csv"
 TRACKS = ("lake", "jungle", "mountain")
@@ -51,7 +52,7 @@ def _parse(row: dict[str, str], line: int) -> PublicRecording:
                           log=(row.get("log") or "").strip() or LOG_NAME)
     if (rec.track not in TRACKS or rec.input not in INPUTS or len(rec.commit) != 40 or rec.repository.count("/") != 1
             or not rec.log.endswith(".csv") or any(c in rec.log for c in "/\\")):
-        raise ValueError(f"{MANIFEST}:{line}: bad entry {rec}")
+        raise BadValue(f"{MANIFEST}:{line}: bad entry {rec}")
     return rec
 
 
@@ -61,7 +62,7 @@ def public_recordings() -> list[PublicRecording]:
     recs = [_parse(row, i) for i, row in enumerate(csv.DictReader(text.splitlines()), start=2)]
     names = [r.name for r in recs]
     if len(set(names)) != len(names):
-        raise ValueError(f"{MANIFEST}: recording names repeat")
+        raise BadValue(f"{MANIFEST}: recording names repeat")
     return recs
 
 
@@ -69,7 +70,7 @@ def fold_arguments(recordings: Iterable[PublicRecording], root: str, fold: str) 
     """``rbc train`` arguments holding fold ``fold`` out: ``--data ROOT/NAME`` for the others, ``--val-data`` for it."""
     recordings = list(recordings)
     if fold not in {r.fold for r in recordings}:
-        raise ValueError(f"unknown fold {fold!r}; folds: {', '.join(sorted({r.fold for r in recordings}))}")
+        raise BadValue(f"unknown fold {fold!r}; folds: {', '.join(sorted({r.fold for r in recordings}))}")
     root = root.rstrip("/")
     return [a for r in recordings for a in ("--val-data" if r.fold == fold else "--data", f"{root}/{r.name}")]
 
@@ -81,7 +82,7 @@ def select(recordings: Iterable[PublicRecording], track: str | None = None,
     wanted = list(names or [])
     unknown = sorted(set(wanted) - {r.name for r in recordings})
     if unknown:
-        raise ValueError(f"unknown recording(s) {', '.join(unknown)}; known: {', '.join(r.name for r in recordings)}")
+        raise BadValue(f"unknown recording(s) {', '.join(unknown)}; known: {', '.join(r.name for r in recordings)}")
     return [r for r in recordings if (track is None or r.track == track) and (not wanted or r.name in wanted)]
 
 

@@ -16,8 +16,8 @@ import numpy as np
 from models.data.labels import centred_average
 from models.training.metrics import pearson_r
 from protocol.datalog import find_log, read_log
+from protocol.stamps import frame_intervals, frame_time, session_ids
 from tools.realdata.sharpness import sharpness_values
-from tools.realdata.stamps import frame_intervals, frame_time, session_ids
 
 #: Rows recorded below this speed (the log's unit: mph for the Udacity simulator) count as creeping.
 CREEP_SPEED = 5.0

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from protocol.datalog import read_log
+from protocol.errors import BadValue
 from tools.realdata.sharpness import evenly_spaced
 
 #: Size of the thumbnails frames are matched by (colour layout, not detail).
@@ -22,7 +23,7 @@ def centre_frames(folders: Sequence[Path], count: int) -> list[Path]:
         samples, _ = read_log(folder)
         paths += [s.center for s in samples]
     if not paths:
-        raise ValueError(f"no readable frames in {', '.join(map(str, folders))}")
+        raise BadValue(f"no readable frames in {', '.join(map(str, folders))}")
     return evenly_spaced(paths, count)
 
 

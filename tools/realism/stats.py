@@ -2,7 +2,7 @@
 
 The bands are data (:data:`BANDS`): rows of the 320x160 frame where the real simulator's camera shows
 sky, the horizon, far and near road and the car's bonnet (horizon near row 64, bonnet from row 137,
-as measured on the real lake frames; see ``tools/drivelog/camera.py``).
+as measured on the real lake frames; see :mod:`protocol.camera`).
 """
 
 from __future__ import annotations
@@ -13,9 +13,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from protocol.camera import BONNET_ROW
+
 #: (name, first row, end row) of each band of a 320x160 frame.
 BANDS: tuple[tuple[str, int, int], ...] = (
-    ("sky", 0, 50), ("horizon", 50, 72), ("far_road", 72, 100), ("near_road", 100, 137), ("bonnet", 137, 160))
+    ("sky", 0, 50), ("horizon", 50, 72), ("far_road", 72, 100), ("near_road", 100, BONNET_ROW),
+    ("bonnet", BONNET_ROW, 160))
 #: Per band: mean red, green, blue, brightness (grey mean), contrast (grey std), colourfulness (mean HSV
 #: saturation), edge density (share of Canny edge pixels) and sharpness (log10 of the Laplacian's variance).
 MEASURES: tuple[str, ...] = ("red", "green", "blue", "brightness", "contrast", "saturation", "edges", "sharpness")

@@ -18,6 +18,7 @@ import numpy as np
 
 from protocol import FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG, encode_image, encode_telemetry
 from protocol.datalog import find_log, read_log
+from protocol.errors import BadValue
 from protocol.facts import CAMERAS
 
 log = logging.getLogger(__name__)
@@ -41,13 +42,13 @@ class SourceFrame:
 def log_frames(path: Path, camera: str = "center") -> list[SourceFrame]:
     """All frames of a driving log from one camera, JPEG bytes sent as recorded."""
     if camera not in CAMERAS:
-        raise ValueError(f"camera must be one of {CAMERAS}, not {camera!r}")
+        raise BadValue(f"camera must be one of {CAMERAS}, not {camera!r}")
     samples, _ = read_log(find_log(Path(path)))  # the training pipeline's tolerant reader (numpy/stdlib only)
     frames = []
     for row in samples:
         image = getattr(row, camera)
         if image is None:
-            raise ValueError(f"{row.log}:{row.line}: the log has no {camera} camera image")
+            raise BadValue(f"{row.log}:{row.line}: the log has no {camera} camera image")
         jpeg = image.read_bytes()
         frames.append(SourceFrame(base64.b64encode(jpeg).decode("ascii"), row.steering * MAX_STEERING_DEG,
                             row.throttle, row.speed))
@@ -79,7 +80,7 @@ def synthetic_frames(n: int, seed: int = 0) -> list[SourceFrame]:
 def cycle_payloads(frames: list[SourceFrame], n: int | None = None, decimal: str = ".") -> Iterator[dict[str, str]]:
     """Payloads of ``frames`` cycled (``n`` in total, or forever); each payload is built once."""
     if not frames:
-        raise ValueError("no frames to send")
+        raise BadValue("no frames to send")
     payloads = [f.payload(decimal) for f in frames]
     it = itertools.cycle(payloads)
     return it if n is None else itertools.islice(it, n)

@@ -16,10 +16,12 @@ import time
 from pathlib import Path
 from types import TracebackType
 
+from protocol.errors import UserError
+
 _LISTENING = re.compile(r"listening on (http://\S+)")
 
 
-class ServerStartError(RuntimeError):
+class ServerStartError(UserError, RuntimeError):
     """The server exited or did not start listening in time; the message holds its log tail."""
 
 

@@ -21,6 +21,7 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from protocol import SteerCommand, parse_steer
+from protocol.errors import BadValue
 from tools.wire.websocket import OP_BINARY, OP_TEXT, ConnectionClosed, WebSocketConnection, client_frame
 
 log = logging.getLogger(__name__)
@@ -62,9 +63,9 @@ class UnityWireClient:
     def __init__(self, url: str = "http://127.0.0.1:4567", timeout: float = 10.0, decimal: str = ".") -> None:
         parts = urlsplit(url if "://" in url else f"http://{url}")
         if parts.scheme not in ("http", "ws"):
-            raise ValueError(f"only http:// or ws:// URLs are supported, not {url!r}")
+            raise BadValue(f"only http:// or ws:// URLs are supported, not {url!r}")
         if decimal not in (".", ","):
-            raise ValueError(f"decimal must be '.' or ',', not {decimal!r}")
+            raise BadValue(f"decimal must be '.' or ',', not {decimal!r}")
         self.host = parts.hostname or "127.0.0.1"
         self.port = parts.port or 4567
         self.timeout = timeout

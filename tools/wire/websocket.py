@@ -16,14 +16,17 @@ import struct
 import time
 
 from protocol import ProtocolError
+from protocol.errors import UserError
 from protocol.websocket import xor_mask
 
 WS_GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
 OP_CONT, OP_TEXT, OP_BINARY, OP_CLOSE, OP_PING, OP_PONG = 0x0, 0x1, 0x2, 0x8, 0x9, 0xA
 
 
-class ConnectionClosed(ConnectionError):
+class ConnectionClosed(UserError, ConnectionError):
     """The server closed the WebSocket (or the Engine.IO session)."""
+
+    hint = "is drive_server running at that address?"
 
 
 def client_frame(opcode: int, payload: bytes, fin: bool = True) -> bytes:

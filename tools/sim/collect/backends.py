@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from drive_server.runrecords import file_sha256, write_bytes
+from protocol.errors import BadValue
 from tools.ray_support import BACKENDS
 from tools.sim.collect.dataset import CollectConfig, collect
 from tools.sim.worldgen import WorldGenConfig, write_world
@@ -69,7 +70,7 @@ def collect_world(job: WorldJob) -> WorldOutcome:
     path = write_world(job.seed, job.world_path, job.generator)
     result = collect(replace(job.collect, track=str(path)), Path(job.folder), overwrite=True, start=job.start)
     if not result.interrupted and result.sim_time_s + 60 >= WORLD_TIME_SLOT.total_seconds():
-        raise ValueError(f"world {job.seed}: {result.sim_time_s:.0f} s of driving do not fit the day of simulated "
+        raise BadValue(f"world {job.seed}: {result.sim_time_s:.0f} s of driving do not fit the day of simulated "
                          "time each world has (frame names would collide); collect fewer laps per world")
     causes: dict[str, int] = {}
     for lap in result.laps:
@@ -158,9 +159,9 @@ def run_jobs(jobs: list[WorldJob], workers: int, backend: str = "local",
              address: str | None = None) -> Iterator[tuple[WorldJob, WorldOutcome]]:
     """(job, outcome) of every job, in the order they finish (use with ``contextlib.closing``)."""
     if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        raise BadValue(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if backend == "ray":
         return _ray(jobs, workers, address)
     if address:
-        raise ValueError("--address is the Ray cluster's address; add --backend ray")
+        raise BadValue("--address is the Ray cluster's address; add --backend ray")
     return _local(jobs, workers)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from protocol import SpeedUnit
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, format_row, frame_name, last_row_stamp
+from protocol.errors import BadValue
 from protocol.facts import CAMERAS, COLLECT_SPEED_KMH
 from protocol.jpeg import encode_jpeg
 from protocol.rigfile import write_rig
@@ -42,8 +43,8 @@ log = logging.getLogger(__name__)
 EPOCH = dt.datetime(2020, 1, 1, 12, 0, 0)  # first timestamp of a new log (fixed: runs are reproducible)
 
 
-class OutputDirError(ValueError):
-    """The output directory is not empty and neither overwrite nor append was asked for."""
+class OutputDirError(BadValue):
+    """The output directory is not empty and neither overwrite nor append was asked for (the message says so)."""
 
 
 @dataclass(frozen=True)
@@ -66,11 +67,11 @@ class CollectConfig:
 
     def __post_init__(self) -> None:
         if self.cameras not in (1, 3):
-            raise ValueError(f"cameras must be 1 or 3, got {self.cameras}")
+            raise BadValue(f"cameras must be 1 or 3, got {self.cameras}")
         if not 0 < self.rate_hz <= self.sim_fps:
-            raise ValueError(f"rate_hz must be in (0, {self.sim_fps}], got {self.rate_hz}")
+            raise BadValue(f"rate_hz must be in (0, {self.sim_fps}], got {self.rate_hz}")
         if self.laps < 1:
-            raise ValueError(f"laps must be >= 1, got {self.laps}")
+            raise BadValue(f"laps must be >= 1, got {self.laps}")
         SpeedUnit(self.speed_unit)
 
 
@@ -96,7 +97,7 @@ class CollectResult:
 def prepare_output(out_dir: Path, overwrite: bool = False, append: bool = False) -> dt.datetime:
     """Create or check the output folder; return the timestamp of the first new row."""
     if overwrite and append:
-        raise ValueError("choose overwrite or append, not both")
+        raise BadValue("choose overwrite or append, not both")
     out_dir.mkdir(parents=True, exist_ok=True)
     if any(out_dir.iterdir()):
         if overwrite:
@@ -145,7 +146,7 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
     track = get_track(config.track)  # a bad track or cone count is an error before any output exists
     place_cones(track, config.cones, config.cone_seed)
     if resume and (overwrite or append):
-        raise ValueError("--resume continues a collection: not with --overwrite or --append")
+        raise BadValue("--resume continues a collection: not with --overwrite or --append")
     kept = kept_rows(out_dir) if resume else []
     first = EPOCH if resume else prepare_output(out_dir, overwrite, append)
     write_rig(out_dir, config.camera, append=append or resume)  # before any frame: rbc train reads it

@@ -28,8 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from drive_server.runrecords import atomic_path, write_json, write_text
+from drive_server.runrecords import atomic_path, read_json, write_json, write_text
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME
+from protocol.errors import BadValue
 from protocol.rigfile import write_rig
 from tools.sim.collect.backends import WORLD_TIME_SLOT, WorldJob, WorldOutcome, run_jobs
 from tools.sim.collect.dataset import EPOCH, CollectConfig, OutputDirError
@@ -81,14 +82,14 @@ class WorldsConfig:
     def __post_init__(self) -> None:
         problem = light_range_problem(*self.light_range) if self.light_range is not None else None
         if problem:
-            raise ValueError(f"--light-range: {problem}")
+            raise BadValue(f"--light-range: {problem}")
         if not 1 <= self.count <= MAX_WORLDS:
-            raise ValueError(f"--worlds must be 1..{MAX_WORLDS}, got {self.count}")
+            raise BadValue(f"--worlds must be 1..{MAX_WORLDS}, got {self.count}")
         if self.first_seed < 0:
-            raise ValueError(f"--world-seed must be >= 0, got {self.first_seed}")
+            raise BadValue(f"--world-seed must be >= 0, got {self.first_seed}")
         problem = training_seed_problem(self.first_seed, self.count)
         if problem and not self.allow_eval_worlds:
-            raise ValueError(problem)
+            raise BadValue(problem)
 
     @property
     def seeds(self) -> list[int]:
@@ -129,7 +130,7 @@ class WorldsResult:
 def _prepare(out: Path, plan: dict, overwrite: bool, resume: bool) -> Path:
     partial = out / PARTIAL
     if overwrite and resume:
-        raise ValueError("choose --overwrite or --resume, not both")
+        raise BadValue("choose --overwrite or --resume, not both")
     out.mkdir(parents=True, exist_ok=True)
     if overwrite:
         for name in (LOG_NAME, WORLDS_CSV):
@@ -143,7 +144,7 @@ def _prepare(out: Path, plan: dict, overwrite: bool, resume: bool) -> Path:
                              "interrupted collection of the same worlds")
     plan_file = partial / "plan.json"
     if resume and plan_file.is_file():
-        earlier = json.loads(plan_file.read_text(encoding="utf-8"))
+        earlier = read_json(plan_file)
         if earlier != plan:
             diff = sorted(k for k in plan if earlier.get(k) != plan[k])
             raise OutputDirError(f"--resume: {out} was started with other {', '.join(diff)} arguments; "

@@ -12,6 +12,8 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from protocol.errors import BadValue
+
 
 class WallClockPacer:
     """``on_frame`` hook: wait until ``speed`` x the elapsed wall time has reached the frame's time."""
@@ -19,7 +21,7 @@ class WallClockPacer:
     def __init__(self, speed: float = 1.0, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep) -> None:
         if speed <= 0:
-            raise ValueError(f"speed must be positive, got {speed}")
+            raise BadValue(f"speed must be positive, got {speed}")
         self.speed, self._clock, self._sleep = speed, clock, sleep
         self._start: float | None = None
 

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from protocol import SpeedUnit, SteerCommand
+from protocol.errors import BadValue
 from protocol.facts import DEPLOY_SPEED_KMH
 from tools.sim.driving.rules import (
     Intervention,
@@ -49,22 +50,22 @@ class ScenarioConfig:
 
     def __post_init__(self) -> None:
         if self.laps < 1:
-            raise ValueError(f"laps must be >= 1, got {self.laps}")
+            raise BadValue(f"laps must be >= 1, got {self.laps}")
         if self.sim_fps < 1 or self.control_hz <= 0:
-            raise ValueError("sim_fps and control_hz must be positive")
+            raise BadValue("sim_fps and control_hz must be positive")
         if not self.realtime:
             ratio = self.sim_fps / self.control_hz
             if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-                raise ValueError(f"control_hz {self.control_hz} must divide sim_fps {self.sim_fps}")
+                raise BadValue(f"control_hz {self.control_hz} must divide sim_fps {self.sim_fps}")
         if self.light_intensity < 0:
-            raise ValueError(f"light intensity must be >= 0, got {self.light_intensity}")
+            raise BadValue(f"light intensity must be >= 0, got {self.light_intensity}")
         if self.cones < 0:
-            raise ValueError(f"cones must be >= 0, got {self.cones}")
+            raise BadValue(f"cones must be >= 0, got {self.cones}")
         if self.speed_limit_kmh <= 0:
-            raise ValueError(f"speed limit must be positive, got {self.speed_limit_kmh} km/h")
+            raise BadValue(f"speed limit must be positive, got {self.speed_limit_kmh} km/h")
         SpeedUnit(self.speed_unit)
         if self.vehicle not in VEHICLE_KINDS:
-            raise ValueError(f"vehicle must be one of {', '.join(VEHICLE_KINDS)}, got {self.vehicle!r}")
+            raise BadValue(f"vehicle must be one of {', '.join(VEHICLE_KINDS)}, got {self.vehicle!r}")
         camera_rig(self.camera)  # an unknown rig is a ValueError naming the known ones
 
     @property

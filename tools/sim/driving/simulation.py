@@ -112,7 +112,7 @@ class Simulation:
         dt = self.params.dt
         self.vehicle.friction = self._friction[self.follower.i]  # the surface under the car (last frame's)
         st = self.vehicle.step(command.steering, command.throttle)
-        cx, cy = self.vehicle.center
+        cx, cy = self.vehicle.centre
         prev_s = self.proj.s
         self.proj = proj = self.follower.project(cx, cy)
         self._progress(prev_s, proj.s)
@@ -176,7 +176,7 @@ class Simulation:
 
         if self.renderer is None:
             raise RuntimeError("this Simulation was created with render=False")
-        cx, cy = self.vehicle.center
+        cx, cy = self.vehicle.centre
         return self.renderer.render(Pose(cx, cy, self.vehicle.state.yaw), camera=camera,
                                     light_intensity=self.config.light_intensity, pitch_deg=jitter[0],
                                     roll_deg=jitter[1])

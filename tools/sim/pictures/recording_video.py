@@ -17,6 +17,7 @@ import numpy as np
 
 from protocol.datalog import read_log
 from protocol.datalog_writer import parse_frame_stamp
+from protocol.errors import BadValue
 from protocol.facts import MAX_STEERING_DEG
 from tools.sim.pictures.text import draw_text
 from tools.sim.pictures.video import VideoWriter
@@ -98,5 +99,5 @@ def write_recording_video(source: Path, out: Path, fps: float | None = None, spe
     finally:
         path = writer.close()
     if path is None:
-        raise ValueError(f"{source}: no readable frame to make a video of")
+        raise BadValue(f"{source}: no readable frame to make a video of")
     return VideoSummary(path, writer.frames, fps, interventions, writer.backend)

@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from protocol.errors import BadValue
 from protocol.facts import MAX_STEERING_DEG
 from tools.sim.driving.scenario import FrameEvent, RunResult
 from tools.sim.pictures.text import draw_text
@@ -252,7 +253,7 @@ class StripCollector:
 
     def write(self, path: str | Path, cols: int = 4) -> Path:
         if not self.frames:
-            raise ValueError("no frames collected")
+            raise BadValue("no frames collected")
         h, w = self.frames[0].shape[:2]
         rows = math.ceil(len(self.frames) / cols)
         sheet = np.full((rows * (h + 4) + 4, cols * (w + 4) + 4, 3), 20, np.uint8)

@@ -13,13 +13,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from protocol import camera as real
+from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
-VFOV_DEG = 60.0  # vertical field of view, as Unity's Camera.fieldOfView
+VFOV_DEG = real.VFOV_DEG  # vertical field of view, as Unity's Camera.fieldOfView (both rigs)
+# the classic rig, the first headless camera (the real simulator's is protocol.camera's)
 CAMERA_HEIGHT = 1.6  # metres above the road
 CAMERA_FORWARD = 0.6  # metres ahead of the body centre (roof, above the windscreen)
 CAMERA_PITCH_DEG = -4.0  # slightly down
-CAMERA_OFFSETS = {"center": 0.0, "left": 0.95, "right": -0.95}  # metres to the left of the centre line of the car
+# metres to the left of the centre line of the car (both rigs)
+CAMERA_OFFSETS = {"center": 0.0, "left": real.SIDE_OFFSET_M, "right": -real.SIDE_OFFSET_M}
 FOG_START, FOG_RANGE = 30.0, 250.0  # metres: no haze nearer than FOG_START, e-folding distance beyond
 MAX_GROUND_DIST = 3000.0  # rays that graze the horizon are clamped to this distance
 MIP_BIAS = 0.3  # >0 picks sharper mip levels (a little aliasing rather than blur)
@@ -27,7 +31,7 @@ MAX_MIP = 6
 
 
 def focal_px() -> float:
-    return (FRAME_HEIGHT / 2) / math.tan(math.radians(VFOV_DEG) / 2)
+    return real.focal_px(FRAME_HEIGHT, VFOV_DEG)
 
 
 def fog_weight(dist: np.ndarray | float, density: float = 1.0) -> np.ndarray | float:
@@ -111,13 +115,14 @@ class CameraRig:
 
 
 #: The rigs a simulation can use. ``unity`` (the default): the real simulator's camera as measured on its
-#: frames (``tools/drivelog/camera.py``: pitch 6.2 deg so the horizon meets row 64-65, height 1.40 m, side
-#: cameras 0.95 m out) with its bonnet from row 137 (``tools/sim/render/bonnet.py``). ``classic``: the first
+#: frames (:mod:`protocol.camera`: its pitch puts the horizon at row 64-65) with its bonnet
+#: (``tools/sim/render/bonnet.py``). ``classic``: the first
 #: headless camera (the paper's tables and the models trained before the unity rig; version-1 tracks
 #: render with it byte for byte as they always did).
 RIGS: dict[str, CameraRig] = {
     "classic": CameraRig("classic"),
-    "unity": CameraRig("unity", height=1.40, pitch_deg=-6.2, side_offset=0.95, bonnet=True),
+    "unity": CameraRig("unity", height=real.HEIGHT_M, pitch_deg=-real.PITCH_DEG, side_offset=real.SIDE_OFFSET_M,
+                       bonnet=True),  # pitch: + is up here
 }
 DEFAULT_RIG = "unity"
 #: The rig of a model whose record names none: every model made before the unity rig learnt classic frames.
@@ -128,7 +133,7 @@ def camera_rig(name: str) -> CameraRig:
     try:
         return RIGS[name]
     except KeyError:
-        raise ValueError(f"unknown camera rig {name!r}; expected one of {', '.join(RIGS)}") from None
+        raise BadValue(f"unknown camera rig {name!r}; expected one of {', '.join(RIGS)}") from None
 
 
 def camera_models(rig: str = DEFAULT_RIG) -> dict[str, CameraModel]:

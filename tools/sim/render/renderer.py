@@ -13,6 +13,7 @@ import math
 import cv2
 import numpy as np
 
+from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 from tools.sim.render.bonnet import bonnet_layer, draw_bonnet
 from tools.sim.render.camera import (
@@ -144,7 +145,7 @@ class Renderer:
         hit = self._lut_cache.get(intensity)
         if hit is None:
             if not math.isfinite(intensity) or intensity < 0:
-                raise ValueError(f"light intensity must be a finite number >= 0, got {intensity!r}")
+                raise BadValue(f"light intensity must be a finite number >= 0, got {intensity!r}")
             factor = 1.0 + (intensity - 1.0) * np.arange(256) / 255.0
             one = 128 if factor.max() < 1.99 else 255.0 / factor.max()
             hit = (np.round(factor * one).astype(np.uint8), 1.0 / one)

@@ -74,9 +74,11 @@ class PropPainter:
         self.view_dist = VIEW_DISTANCE[world.track.scenery.theme]
         self.fog_density = world.track.appearance.haze
         self._tabulate(world)
-        # (polyline, height, colour, bounding centre, radius): bridge rails, then guard rails
-        self.rails = [(r, RAIL_HEIGHT, RAIL) + _bounds(r) for r in world.props.rails]
-        self.rails += [(r, BARRIER_HEIGHT, BARRIER) + _bounds(r) for r in world.props.barriers]
+        # (polyline, height, lit colour RGBA, bounding centre, radius): bridge rails, then guard rails
+        rail_lit, barrier_lit = (self._lit(np.array([albedo], np.float64), np.ones(1), 0.6)[0]
+                                 for albedo in (RAIL, BARRIER))
+        self.rails = [(r, RAIL_HEIGHT, rail_lit) + _bounds(r) for r in world.props.rails]
+        self.rails += [(r, BARRIER_HEIGHT, barrier_lit) + _bounds(r) for r in world.props.barriers]
         self._cells: dict[tuple[int, int], np.ndarray] = {}
 
     # -- tables ---------------------------------------------------------------------------------------
@@ -236,31 +238,32 @@ class PropPainter:
 
     def _draw_rails(self, fb: np.ndarray, cam: CameraModel, pos: np.ndarray, axes: np.ndarray, intensity: float,
                     haze: np.ndarray) -> None:
-        """Bridge and guard rails: a top and a middle rail and posts, clipped at the camera plane."""
+        """Bridge and guard rails: a top and a middle rail and posts, clipped at the camera plane.
+
+        The three heights of a rail are projected in one call (the same arithmetic point by point as one
+        call per height: the same pixels, with fewer NumPy calls per frame)."""
         up = axes[:, 2]
         reach = self.view_dist + RAIL_CULL_MARGIN
-        for rail, top, albedo, centre, radius in self.rails:
+        for rail, top, lit, centre, radius in self.rails:
             if math.hypot(pos[0] - centre[0], pos[1] - centre[1]) > radius + reach:
                 continue
             cam_xyz = (rail - pos[:2]) @ axes[:, :2].T - pos[2] * up
             front = cam_xyz[:, 2] > NEAR
-            if front.sum() < 2:
+            if np.count_nonzero(front) < 2:
                 continue
             dist = float(np.median(np.hypot(cam_xyz[front, 0], cam_xyz[front, 2])))
             if dist > self.view_dist:
                 continue
             fog = float(fog_weight(dist, self.fog_density))
-            lit = self._lit(np.array([albedo], np.float64), np.ones(1), 0.6)[0]
             rgb = lit[:3] * (1 + (intensity - 1) / 255 * lit[3])
             color = (rgb * (1 - fog) + haze * fog).tolist()
-            for zh, width in ((top, 2), (0.5 * top, 1)):
-                pts = cam_xyz + zh * up
-                for run in _runs(front):
-                    px = np.round(cam.project(pts[run]) * (1 << SHIFT)).astype(np.int32)
-                    cv2.polylines(fb, [px], False, color, width, cv2.LINE_AA, SHIFT)
-            tops = np.round(cam.project(cam_xyz[front] + top * up) * (1 << SHIFT)).astype(np.int32)
-            feet = np.round(cam.project(cam_xyz[front]) * (1 << SHIFT)).astype(np.int32)
-            cv2.polylines(fb, list(np.stack([feet, tops], 1)), False, color, 1, cv2.LINE_AA, SHIFT)
+            heights = np.stack([cam_xyz + top * up, cam_xyz + 0.5 * top * up, cam_xyz])
+            px = np.round(cam.project(heights) * (1 << SHIFT)).astype(np.int32)  # top rail, middle rail, feet
+            runs = _runs(front)
+            for level, width in ((0, 2), (1, 1)):
+                for run in runs:
+                    cv2.polylines(fb, [px[level, run]], False, color, width, cv2.LINE_AA, SHIFT)
+            cv2.polylines(fb, list(np.stack([px[2, front], px[0, front]], 1)), False, color, 1, cv2.LINE_AA, SHIFT)
 
 
 def _bounds(rail: np.ndarray) -> tuple[np.ndarray, float]:
@@ -287,6 +290,6 @@ def _leaf_colours(t: np.ndarray, leaves: dict[int, tuple]) -> np.ndarray:
 
 def _runs(mask: np.ndarray) -> list[slice]:
     """Slices of at least two consecutive True values of a 1-D mask."""
-    edges = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
     return [slice(a, b) for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0], strict=True)
             if b - a >= 2]

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from protocol.errors import BadValue
 from tools.sim.track.road import Track
 
 CONE_RADIUS = 0.25  # metres, base radius of the 0.9 m highway cone the renderer draws
@@ -27,13 +28,13 @@ def place_cones(track: Track, n: int, seed: int, min_spacing: float = 25.0) -> n
     gives the same cones, a different seed new positions.
     """
     if n < 0:
-        raise ValueError(f"number of cones must be >= 0, got {n}")
+        raise BadValue(f"number of cones must be >= 0, got {n}")
     if n == 0:
         return np.zeros((0, 2))
     usable = track.length - 2 * CONE_START_CLEARANCE
     slot = usable / n
     if slot < min_spacing:
-        raise ValueError(f"{n} cones {min_spacing:g} m apart do not fit on {track.name!r} "
+        raise BadValue(f"{n} cones {min_spacing:g} m apart do not fit on {track.name!r} "
                          f"({usable:.0f} m usable); use fewer cones")
     rng = np.random.default_rng(seed)
     along = track.start_s + CONE_START_CLEARANCE + slot * np.arange(n) + rng.uniform(0, slot - min_spacing, n)

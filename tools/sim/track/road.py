@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from protocol.errors import BadValue
 from tools.sim.track.looks import Appearance, Edges, SkySpec
 from tools.sim.track.themes import THEMES as THEMES  # re-exported: the track file names themes
 from tools.sim.track.themes import V1_THEMES as V1_THEMES
@@ -25,8 +26,10 @@ V1_SURFACE_KINDS = SURFACE_KINDS[:3]  # what a version-1 track file may use
 MIN_TURN_RADIUS = 6.0  # metres: a 2.7 m wheelbase at 25 degrees turns on ~5.8 m
 
 
-class TrackError(ValueError):
+class TrackError(BadValue):
     """A track file (or dict) is missing something or describes a road that cannot be driven."""
+
+    hint = "the track file format is in docs/formats.md (File formats: Track file)"
 
 
 @dataclass(frozen=True)

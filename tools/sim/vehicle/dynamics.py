@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 
+from protocol.errors import BadValue
 from tools.sim.vehicle.kinematic import GRAVITY_MPS2, VEHICLE_KINDS, Vehicle, VehicleParams, VehicleState
 
 __all__ = ["DynamicVehicle", "brush_lateral_force", "make_vehicle"]
@@ -96,7 +97,7 @@ class DynamicVehicle:
 
     # --- the interface the simulation uses ----------------------------------------------------------
     @property
-    def center(self) -> tuple[float, float]:
+    def centre(self) -> tuple[float, float]:
         """Body centre (half a wheelbase ahead of the rear axle), as for the kinematic car."""
         s = self.state
         h = 0.5 * self._L
@@ -212,4 +213,4 @@ def make_vehicle(kind: str, state: VehicleState, params: VehicleParams | None = 
         return Vehicle(state, params)
     if kind == "dynamic":
         return DynamicVehicle(state, params)
-    raise ValueError(f"unknown vehicle model {kind!r} (known: {', '.join(VEHICLE_KINDS)})")
+    raise BadValue(f"unknown vehicle model {kind!r} (known: {', '.join(VEHICLE_KINDS)})")

@@ -5,7 +5,7 @@ The Udacity car is a Unity wheel-collider model; at the speeds of the paper (25-
 roads a kinematic bicycle with a first-order longitudinal model reproduces what matters for
 behavioural cloning: the turning radius for a wheel angle, a steering rate limit, a top speed
 of about 30 mph and braking. The state is kept at the rear axle (where the turning radius is
-exactly ``L / tan(delta)``); ``center`` gives the body centre used for cameras, collisions and
+exactly ``L / tan(delta)``); ``centre`` gives the body centre used for cameras, collisions and
 cross-track error.
 
 Sign convention of the simulator and its logs (Unity's): positive steering turns RIGHT (clockwise
@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass, replace
 
 from protocol import MAX_STEERING_DEG
+from protocol.errors import BadValue
 
 MPS_PER_KMH = 1.0 / 3.6
 GRAVITY_MPS2 = 9.81
@@ -98,20 +99,20 @@ class VehicleParams:
 
     def __post_init__(self) -> None:
         if self.wheelbase_m <= 0 or self.max_steer_deg <= 0 or self.steer_rate_deg_s <= 0:
-            raise ValueError("wheelbase, steering limit and steering rate must be positive")
+            raise BadValue("wheelbase, steering limit and steering rate must be positive")
         if self.physics_hz <= 0:
-            raise ValueError(f"physics rate must be positive, got {self.physics_hz}")
+            raise BadValue(f"physics rate must be positive, got {self.physics_hz}")
         if self.max_accel_mps2 <= self.rolling_mps2:
-            raise ValueError("max_accel_mps2 must exceed rolling_mps2 or the car can never reach its top speed")
+            raise BadValue("max_accel_mps2 must exceed rolling_mps2 or the car can never reach its top speed")
         if not 0 < self.cg_to_front_axle_m < self.wheelbase_m:
-            raise ValueError("the centre of gravity must lie between the axles")
+            raise BadValue("the centre of gravity must lie between the axles")
         if min(self.mass_kg, self.yaw_inertia_kgm2, self.cornering_stiffness_front_n_per_rad,
                self.cornering_stiffness_rear_n_per_rad, self.dynamics_hz) <= 0:
-            raise ValueError("mass, yaw inertia, cornering stiffness and dynamics_hz must be positive")
+            raise BadValue("mass, yaw inertia, cornering stiffness and dynamics_hz must be positive")
         if not 0 <= self.kinematic_below_mps < self.dynamic_above_mps:
-            raise ValueError("need 0 <= kinematic_below_mps < dynamic_above_mps")
+            raise BadValue("need 0 <= kinematic_below_mps < dynamic_above_mps")
         if any(mu <= 0 for _, mu in self.surface_friction):
-            raise ValueError("surface friction coefficients must be positive")
+            raise BadValue("surface friction coefficients must be positive")
 
     @property
     def dt(self) -> float:
@@ -162,7 +163,7 @@ class Vehicle:
 
     # --- geometry -------------------------------------------------------------------------------
     @property
-    def center(self) -> tuple[float, float]:
+    def centre(self) -> tuple[float, float]:
         """Body centre (half a wheelbase ahead of the rear axle)."""
         s = self.state
         h = 0.5 * self.params.wheelbase_m

@@ -6,6 +6,7 @@ import json
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from protocol.errors import BadValue
 from tools.sim.track.road import MIN_TURN_RADIUS, THEMES
 from tools.sim.track.themes import GENERIC_THEMES
 
@@ -26,7 +27,7 @@ def world_seed_range(name: str) -> range:
     try:
         return SEED_RANGES[name]
     except KeyError:
-        raise ValueError(f"unknown seed range {name!r} (known: {', '.join(SEED_RANGES)})") from None
+        raise BadValue(f"unknown seed range {name!r} (known: {', '.join(SEED_RANGES)})") from None
 
 
 def seed_range_of(seed: int) -> str | None:
@@ -59,14 +60,14 @@ class WorldGenConfig:
 
     def __post_init__(self) -> None:
         if not 0 < self.min_length_m < self.max_length_m:
-            raise ValueError("need 0 < min_length_m < max_length_m")
+            raise BadValue("need 0 < min_length_m < max_length_m")
         if self.min_radius_m < MIN_TURN_RADIUS:
-            raise ValueError(f"min_radius_m must be at least the simulator's {MIN_TURN_RADIUS} m")
+            raise BadValue(f"min_radius_m must be at least the simulator's {MIN_TURN_RADIUS} m")
         if not 2.0 <= self.min_road_width_m <= self.max_road_width_m <= 30.0:
-            raise ValueError("need 2 <= min_road_width_m <= max_road_width_m <= 30")
+            raise BadValue("need 2 <= min_road_width_m <= max_road_width_m <= 30")
         unknown = set(self.themes) - set(THEMES)
         if not self.themes or unknown:
-            raise ValueError(f"themes must be a non-empty subset of {', '.join(THEMES)}")
+            raise BadValue(f"themes must be a non-empty subset of {', '.join(THEMES)}")
 
 
 def seed_label(seed: int) -> str:
@@ -84,15 +85,15 @@ def parse_world_config(text: str) -> WorldGenConfig:
     try:
         values = json.loads(source)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"world config is not JSON: {exc}") from None
+        raise BadValue(f"world config is not JSON: {exc}") from None
     known = {f.name for f in fields(WorldGenConfig)}
     if not isinstance(values, dict) or set(values) - known:
         unknown = sorted(set(values) - known) if isinstance(values, dict) else []
-        raise ValueError(f"world config must be a JSON object of WorldGenConfig fields ({', '.join(sorted(known))})"
+        raise BadValue(f"world config must be a JSON object of WorldGenConfig fields ({', '.join(sorted(known))})"
                          + (f"; unknown: {', '.join(unknown)}" if unknown else ""))
     try:
         if "themes" in values:
             values["themes"] = tuple(values["themes"])
         return WorldGenConfig(**values)
     except TypeError as exc:
-        raise ValueError(f"world config: {exc}") from None
+        raise BadValue(f"world config: {exc}") from None

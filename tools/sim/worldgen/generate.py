@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from protocol.errors import BadValue
 from tools.sim.track.files import FORMAT_VERSION, parse_track, world_seed_of, write_track_file
 from tools.sim.track.road import Track, TrackError
 from tools.sim.worldgen import dress
@@ -34,7 +35,7 @@ def generate_world(seed: int, config: WorldGenConfig = DEFAULT_CONFIG) -> dict:
     :func:`check_world` and (``config.drive_check``) the autopilot's lap with both cars.
     """
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"a world seed is an integer >= 0, got {seed!r}")
+        raise BadValue(f"a world seed is an integer >= 0, got {seed!r}")
     seed = int(seed)
     for candidate in range(config.max_candidates):
         doc = _candidate(seed, candidate, config)

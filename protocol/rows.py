@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocol.datalog import is_header
+from protocol.errors import BadValue
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,7 @@ def parse_rows(text: str) -> RowRange | None:
         return None
     m = re.fullmatch(r"(\d+)\s*-\s*(\d+)", text)
     if not m or not 1 <= int(m.group(1)) <= int(m.group(2)):
-        raise ValueError(f"rows {text!r}: give a 1-based range FIRST-LAST with FIRST <= LAST, e.g. 1-2297")
+        raise BadValue(f"rows {text!r}: give a 1-based range FIRST-LAST with FIRST <= LAST, e.g. 1-2297")
     return RowRange(int(m.group(1)), int(m.group(2)))
 
 

@@ -1,4 +1,8 @@
-"""Per-behavior and per-approach settings: every number of the paper's Tables 4, 5 and 6 in one place."""
+"""Per-behavior and per-approach settings: every number of the paper's Tables 4, 5 and 6 in one place.
+
+Here, below the data, the export and the training that all read it: the data takes a behavior's pipeline
+(:func:`pipeline_for`), ``rbc mirror`` asks whether a behavior keeps to a lane (:func:`keeps_lane`).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,8 @@ from enum import StrEnum
 
 from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
 from models.augmentation.augment import AugmentSpec
-from models.networks.architectures import ARCHITECTURES
+from models.networks.architectures import ARCHITECTURES, Arch
+from protocol.errors import BadValue
 from protocol.facts import BEHAVIORS
 
 #: The paper's behaviors; the names are protocol.facts.BEHAVIORS (defined there once).
@@ -17,12 +22,6 @@ Behavior = StrEnum("Behavior", [(name.upper(), name) for name in BEHAVIORS])
 class Approach(StrEnum):
     OURS = "ours"  # the paper's pipeline: balancing + six augmentations
     NVIDIA = "nvidia"  # NVIDIA's: crop, YUV, no balancing, light augmentation
-
-
-class Arch(StrEnum):
-    SHALLOW = "shallow"
-    PILOTNET = "pilotnet"
-    SHALLOW_WIDE = "shallow-wide"  # not in the paper: models.networks.architectures.SHALLOW_WIDE
 
 
 @dataclass(frozen=True)
@@ -49,7 +48,7 @@ def check_output_scale(scale: float) -> float:
     """``scale`` if an exported model may answer that many times its network (``--output-scale``, not in the
     paper: a model fitted to the drivers it saw answers a new driver more strongly than they steer)."""
     if not 0.1 <= scale <= 2.0:
-        raise ValueError(f"output scale must be 0.1..2, got {scale:g}")
+        raise BadValue(f"output scale must be 0.1..2, got {scale:g}")
     return scale
 
 

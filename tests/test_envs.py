@@ -1,0 +1,247 @@
+"""rbc/Drive-v0: the headless simulator as a Gymnasium environment (tools.envs)."""
+
+from __future__ import annotations
+
+import base64
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+gym = pytest.importorskip("gymnasium", reason="the gym extra is not installed (pip install -e '.[gym]')")
+
+from drive_server.model import SteeringModel  # noqa: E402
+from drive_server.pipeline import DriveConfig, DrivePipeline  # noqa: E402
+from protocol import SpeedUnit, Telemetry  # noqa: E402
+from protocol.errors import BadValue  # noqa: E402
+from protocol.jpeg import decode_jpeg  # noqa: E402
+from tools.envs import ENV_ID, DriveEnv, OnnxPolicy, RewardSpec  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+PRETRAINED = REPO / "models" / "pretrained"
+
+
+@pytest.fixture(scope="module")
+def lake() -> DriveEnv:
+    env = DriveEnv(track="lake")
+    yield env
+    env.close()
+
+
+def _drive(env, steps: int, action=None, seed: int = 0):
+    obs, info = env.reset(seed=seed)
+    frames, rewards = [obs], []
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(info["expert_action"] if action is None else action)
+        frames.append(obs)
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    return frames, rewards, info
+
+
+def test_importing_the_module_in_make_is_all_it_takes():
+    code = ("import gymnasium as gym; env = gym.make('tools.envs:rbc/Drive-v0', track='lake'); "
+            "print(env.spec.id, env.observation_space.shape, env.action_space.shape)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [ENV_ID, "(160,", "320,", "3)", "(1,)"]
+
+
+def test_the_packages_example_runs(capsys):
+    import textwrap
+
+    import tools.envs
+
+    doc = tools.envs.__doc__
+    example = textwrap.dedent(doc[doc.index("    import gymnasium"):doc.index("Keyword arguments")])
+    exec(compile(example, "tools/envs/__init__.py", "exec"), {})
+    assert " m, cte " in capsys.readouterr().out
+
+
+def test_check_env_passes_for_one_and_three_cameras_and_both_controls():
+    from gymnasium.utils.env_checker import check_env
+
+    for kwargs in ({"render_mode": "rgb_array"}, {"cameras": 3, "control": "steer_throttle", "jpeg": False}):
+        env = gym.make(ENV_ID, track="lake", **kwargs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # the checker's warnings too
+            check_env(env.unwrapped, skip_render_check=False)
+        env.close()
+
+
+def test_the_spaces_and_the_info(lake: DriveEnv):
+    obs, info = lake.reset(seed=3)
+    assert obs.shape == (160, 320, 3) and obs.dtype == np.uint8
+    assert lake.action_space.shape == (1,) and lake.action_space.low[0] == -1 and lake.action_space.high[0] == 1
+    for key in ("cte_m", "heading_error_deg", "speed_kmh", "progress_m", "lap_progress", "t_s", "step",
+                "expert_action", "intervention", "laps_done", "jpeg"):
+        assert key in info, key
+    assert info["step"] == 0 and info["speed_kmh"] == 0 and info["intervention"] == ""
+    assert lake.action_space.contains(info["expert_action"])
+    assert abs(info["cte_m"]) <= 0.5 and abs(info["heading_error_deg"]) <= 3.0  # the spawn's noise
+
+
+def test_the_observation_is_the_frame_after_the_wires_jpeg(lake: DriveEnv):
+    obs, info = lake.reset(seed=1)
+    assert np.array_equal(obs, decode_jpeg(info["jpeg"]))  # THE decode of what the wire would carry
+    raw = DriveEnv(track="lake", jpeg=False, render_mode="rgb_array")
+    obs_raw, info_raw = raw.reset(seed=1)
+    assert "jpeg" not in info_raw and np.array_equal(obs_raw, raw.render())
+    diff = np.abs(obs.astype(int) - obs_raw.astype(int))
+    assert 0 < diff.mean() < 6  # JPEG quality 75: a few grey levels
+
+
+def test_same_seed_same_episode_other_seed_other_episode(lake: DriveEnv):
+    frames_a, rewards_a, _ = _drive(lake, 40, seed=11)
+    frames_b, rewards_b, _ = _drive(lake, 40, seed=11)
+    assert rewards_a == rewards_b
+    assert all(np.array_equal(a, b) for a, b in zip(frames_a, frames_b, strict=True))
+    frames_c, _, _ = _drive(lake, 1, seed=12)
+    assert not np.array_equal(frames_a[0], frames_c[0])  # another spawn
+
+
+def test_the_autopilot_drives_and_the_reward_is_the_progress(lake: DriveEnv):
+    _, rewards, info = _drive(lake, 300)
+    assert len(rewards) == 300 and info["intervention"] == ""
+    assert 90 < info["progress_m"] < 140  # 20 s from standstill towards 25 km/h
+    assert sum(rewards) == pytest.approx(info["progress_m"], abs=1.0)  # nothing out of the lane
+    assert abs(info["cte_m"]) < 0.6 and 18 < info["speed_kmh"] < 27
+
+
+def test_leaving_the_road_terminates_with_the_penalty():
+    env = DriveEnv(track="lake", reward=RewardSpec(termination=7.0))
+    obs, info = env.reset(seed=0)
+    rewards = []
+    for _ in range(400):
+        # half lock left: Eq. 14 still drives on (at full lock it brakes to a stop, a take-over for standing still)
+        obs, reward, terminated, truncated, info = env.step([-0.5])
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    assert terminated and not truncated and info["intervention"] == "off_road"
+    assert 4.0 < abs(info["cte_m"]) < 5.5  # where it left the road (off at 4.5 m), not where it was put back
+    assert rewards[-1] < -6.0  # the termination penalty (less the step's progress)
+
+
+def test_step_limit_and_laps_truncate():
+    env = gym.make(ENV_ID, track="lake", max_episode_steps=5, jpeg=False)
+    _, info = env.reset(seed=0)
+    for step in range(1, 6):
+        _, _, terminated, truncated, info = env.step(info["expert_action"])
+        assert truncated == (step == 5) and not terminated
+    lap = DriveEnv(track="lake", jpeg=False)
+    _, rewards, info = _drive(lap, 4000)
+    assert info["laps_done"] and info["lap_progress"] >= 1.0 and info["intervention"] == ""
+    assert sum(rewards) == pytest.approx(lap.client.track_length_m, abs=5.0)
+
+
+def test_three_cameras_are_a_dict_of_the_rig():
+    env = DriveEnv(track="lake", cameras=3)
+    obs, _ = env.reset(seed=0)
+    assert set(obs) == {"center", "left", "right"} and env.observation_space.contains(obs)
+    assert not np.array_equal(obs["left"], obs["right"])
+
+
+def test_steer_control_is_drive_servers_coupled_law(lake: DriveEnv):
+    pipeline = DrivePipeline(SteeringModel(PRETRAINED / "generalist.onnx"), DriveConfig(speed_unit=SpeedUnit.MPH))
+    _, info = lake.reset(seed=0)
+    for _ in range(60):
+        _, _, _, _, info = lake.step(info["expert_action"])
+    for steering in (-0.8, -0.1, 0.0, 0.3, 1.0):
+        command = lake.command([steering])
+        expected = pipeline.control(steering, lake.client.wire_speed())
+        assert (command.steering, command.throttle) == (expected.steering, expected.throttle)
+    throttle_env = DriveEnv(track="lake", control="steer_throttle", speed_limit_kmh=5.0)
+    _, info = throttle_env.reset(seed=0)
+    for _ in range(60):
+        _, _, _, _, info = throttle_env.step([0.0, 1.0])
+    assert info["speed_kmh"] < 8.0  # the governor cuts the throttle at the limit
+    assert throttle_env.command([0.0, 1.0]).throttle <= 0.0 or info["speed_kmh"] < 5.0
+
+
+def test_held_out_worlds_are_refused_for_training():
+    for kwargs in ({"world_seed": 1_000_000}, {"track": "world:1000003"}, {"world_seed": 2_000_000}):
+        with pytest.raises(BadValue, match="held-out worlds must never be trained on") as exc:
+            DriveEnv(**kwargs)
+        assert "purpose='eval'" in exc.value.hint
+    env = DriveEnv(world_seed=1_000_000, purpose="eval", jpeg=False)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (160, 320, 3) and info["intervention"] == ""
+
+
+@pytest.mark.parametrize("kwargs", [{"cameras": 2}, {"control": "throttle"}, {"camera": "fisheye"},
+                                    {"track": "lake", "world_seed": 3}, {"speed_limit_kmh": 0},
+                                    {"max_episode_steps": 0}, {"no_such": 1}, {"action_delay": 2}])
+def test_bad_arguments_are_one_clear_error(kwargs):
+    with pytest.raises(BadValue):
+        DriveEnv(**kwargs)
+
+
+def test_bad_actions_are_refused(lake: DriveEnv):
+    lake.reset(seed=0)
+    for action in ([np.nan], [0.1, 0.2], "left"):
+        with pytest.raises((BadValue, ValueError)):
+            lake.step(action)
+
+
+def test_action_delay_applies_each_action_one_step_late():
+    now, late = DriveEnv(track="lake", jpeg=False), DriveEnv(track="lake", jpeg=False, action_delay=1)
+    actions = [[0.0]] * 20 + [[-0.6]] * 10
+    for env in (now, late):
+        env.reset(seed=5)
+    heading = {}
+    for name, env in (("now", now), ("late", late)):
+        for a in actions:
+            _, _, _, _, info = env.step(a)
+        heading[name] = info["heading_error_deg"]
+    assert heading["now"] > heading["late"] > 0  # both turned left; the late one a step less
+
+
+def test_vector_environments_sync_and_make_vec():
+    envs = gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID, track="lake", jpeg=False)] * 2)
+    obs, infos = envs.reset(seed=[1, 2])
+    assert obs.shape == (2, 160, 320, 3) and infos["expert_action"].shape == (2, 1)
+    for _ in range(5):
+        obs, rewards, terminated, truncated, infos = envs.step(infos["expert_action"])
+    assert rewards.shape == (2,) and not terminated.any()
+    envs.close()
+    vec = gym.make_vec("tools.envs:rbc/Drive-v0", num_envs=2, vectorization_mode="sync", track="lake", jpeg=False)
+    obs, infos = vec.reset(seed=0)
+    obs, rewards, *_ = vec.step(vec.action_space.sample() * 0)
+    assert obs.shape == (2, 160, 320, 3) and rewards.shape == (2,)
+    vec.close()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="forked workers share the parent's built world only on Linux")
+def test_async_vector_environment_gives_the_sync_episodes():
+    DriveEnv(track="lake").reset(seed=0)  # the world is built once here; forked workers inherit it
+    make = [lambda: gym.make(ENV_ID, track="lake", jpeg=False)] * 2
+    results = []
+    for envs in (gym.vector.AsyncVectorEnv(make, context="fork"), gym.vector.SyncVectorEnv(make)):
+        obs, infos = envs.reset(seed=[1, 2])
+        for _ in range(5):
+            obs, rewards, _, _, infos = envs.step(infos["expert_action"])
+        results.append((obs, rewards))
+        envs.close()
+    assert np.array_equal(results[0][0], results[1][0]) and np.array_equal(results[0][1], results[1][1])
+
+
+def test_onnx_policy_drives_lake_through_drive_servers_pipeline():
+    policy = OnnxPolicy(PRETRAINED / "generalist_pilotnet.onnx")
+    env = DriveEnv(track="lake", camera=policy.camera_rig)
+    obs, info = env.reset(seed=0)
+    # the first frame: the same steering drive_server computes from the telemetry carrying this JPEG
+    telemetry = Telemetry(0.0, 0.0, 0.0, base64.b64encode(info["jpeg"]).decode("ascii"))
+    fresh = DrivePipeline(SteeringModel(PRETRAINED / "generalist_pilotnet.onnx"))
+    command, _ = fresh.run(telemetry, fresh.smoother())
+    assert policy(obs, info)[0] == pytest.approx(command.steering, abs=1e-6)
+    total = 0.0
+    for _ in range(400):
+        obs, reward, terminated, truncated, info = env.step(policy(obs, info))
+        total += reward
+        assert not terminated and not truncated
+    assert info["progress_m"] > 150 and total > 140 and abs(info["cte_m"]) < 1.0

@@ -1,0 +1,89 @@
+"""Driving only some rows of a recording: given ranges (``rbc drive-log --rows``), or the stretches a training run
+held out for validation (``--held-out-of RUN_DIR``), so a model can be driven on road it never trained on.
+
+The road is found, and the wheelbase fitted, on the whole recording; then each contiguous stretch of chosen
+rows is driven as a session of its own: the car starts on the recorded path at its first frame.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from protocol.datalog import Sample
+from protocol.rows import RowRange, parse_rows, row_numbers
+from tools.drivelog.path import RecordedDrive
+from tools.drivelog.road import RoadEdges
+
+
+def parse_row_ranges(text: str) -> list[RowRange]:
+    """``"A-B[,C-D...]"`` (1-based, inclusive, as the manifest's rows) -> the ranges."""
+    ranges = [parse_rows(part) for part in text.split(",") if part.strip()]
+    if not ranges:
+        raise ValueError(f"rows {text!r}: give 1-based ranges FIRST-LAST, comma-separated, e.g. 1-500,900-1200")
+    return [r for r in ranges if r is not None]
+
+
+def rows_mask(samples: Sequence[Sample], ranges: Sequence[RowRange]) -> np.ndarray:
+    """Per sample: whether its row of the log (counted as :mod:`protocol.rows` counts) is in ``ranges``."""
+    numbers: dict[Path, dict[int, int]] = {}
+    out = np.zeros(len(samples), bool)
+    for i, s in enumerate(samples):
+        if s.log not in numbers:
+            numbers[s.log] = row_numbers(s.log)
+        row = numbers[s.log].get(s.line, 0)
+        out[i] = any(row in r for r in ranges)
+    return out
+
+
+def held_out_mask(samples: Sequence[Sample], run_dir: Path) -> np.ndarray:
+    """Per sample: whether the training run in ``run_dir`` held its row out for validation (its ``config.json``
+    says which logs it read and how it split them; the split is drawn again, no frame decoded)."""
+    from models.data.trainingdata import split_logs
+    from models.training.train_config import TrainConfig
+
+    path = Path(run_dir) / "config.json"
+    try:
+        stored = json.loads(path.read_text(encoding="utf-8"))["config"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise ValueError(f"{path}: not a training run's config ({exc})") from None
+    config = TrainConfig.from_dict(stored, str(path))
+    dataset, _, val = split_logs(config.data, config.seed, config.data_options())
+    held = {(s.log, s.line) for s in (dataset.samples[i] for i in val)}
+    return np.array([(s.log, s.line) in held for s in samples], bool)
+
+
+def chosen_rows(drive: RecordedDrive, road: RoadEdges | None, keep: np.ndarray
+                ) -> tuple[RecordedDrive, RoadEdges | None]:
+    """``drive`` (and its ``road``) cut to the frames in ``keep``: each contiguous stretch of them within a session
+    becomes a session of its own, its arc length counted from its first frame."""
+    keep = np.asarray(keep, bool)
+    if keep.shape != (len(drive),):
+        raise ValueError(f"keep: one flag per frame ({len(drive)}), got {keep.shape}")
+    idx = np.flatnonzero(keep)
+    if not len(idx):
+        raise ValueError("no frame of the recording is among the chosen rows")
+    # a new stretch where a frame was left out before it or the recording's session changed
+    new = np.r_[True, (np.diff(idx) != 1) | (drive.session[idx[1:]] != drive.session[idx[:-1]])]
+    session = np.cumsum(new) - 1
+    last = np.r_[new[1:], True]
+    dt = np.where(last, 0.0, drive.dt[idx])
+    step = drive.speed[idx] * dt
+    arc = np.zeros(len(idx))
+    for i in range(1, len(idx)):
+        arc[i] = 0.0 if new[i] else arc[i - 1] + step[i - 1]
+
+    def pick(frames: list | None) -> list | None:
+        return None if frames is None else [frames[i] for i in idx]
+
+    cut = RecordedDrive([drive.frames[i] for i in idx], drive.steering[idx], drive.speed[idx], dt, session, arc,
+                        pick(drive.left_frames), pick(drive.right_frames))
+    if road is None:
+        return cut, None
+    return cut, replace(road, left_m=road.left_m[idx], right_m=road.right_m[idx], measured=road.measured[idx],
+                        off_road=None if road.off_road is None else road.off_road[idx],
+                        pitch_deg=None if road.pitch_deg is None else road.pitch_deg[idx])

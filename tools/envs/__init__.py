@@ -1,0 +1,58 @@
+"""The headless simulator as a Gymnasium environment, ``rbc/Drive-v0`` (``pip install -e ".[gym]"``; SB3: ``[rl]``).
+
+Importing this package registers it, so ``gymnasium.make("tools.envs:rbc/Drive-v0", track="lake")`` needs no
+other import. Ten lines with the autopilot driving::
+
+    import gymnasium as gym
+
+    env = gym.make("tools.envs:rbc/Drive-v0", track="lake", render_mode="rgb_array")
+    obs, info = env.reset(seed=0)
+    total = 0.0
+    for _ in range(500):
+        obs, reward, terminated, truncated, info = env.step(info["expert_action"])
+        total += reward
+        if terminated or truncated:
+            obs, info = env.reset()
+    print(f"{total:.0f} m, cte {info['cte_m']:+.2f} m, {info['speed_kmh']:.1f} km/h")
+
+Keyword arguments (:class:`DriveEnvConfig`): ``track`` (a built-in name, a track file or ``world:SEED``) or
+``world_seed``; ``purpose`` ("train" refuses evaluation worlds as ``rbc collect`` does, "eval" allows them);
+``camera`` (the rig: "unity", "classic"); ``cameras`` (1 or 3); ``control`` ("steer": throttle and brake from
+the paper's Eq. 14 exactly as drive_server computes them, or "steer_throttle"); ``speed_limit_kmh``
+(Eq. 14's v_l, a governor with steer_throttle); ``jpeg`` (default True: the wire's JPEG round trip);
+``laps``; ``max_episode_steps``; ``spawn`` ("start" or "random"); ``action_delay`` (1: Unity's two frames in
+flight); ``render_mode`` (None or "rgb_array": the centre camera as rendered); and more in the config.
+
+Spaces: the observation is the centre camera's frame, uint8 (160, 320, 3) RGB, decoded from the JPEG the
+simulator would send (``jpeg=True``, the pixels drive_server and recorded datasets have); with ``cameras=3`` a
+``Dict`` of "center", "left" and "right" frames (SB3: ``MultiInputPolicy``). The action is a float32 ``Box``
+in [-1, 1]: steering (+ = right, 1 = 25 degrees), and with ``steer_throttle`` throttle (< 0 brakes).
+
+Reward (:class:`RewardSpec`): metres along the lap, less 2.5 per second with the car's body over its lane's
+edge, less 10 on a take-over. ``terminated``: the referee took over (off the road, a cone, spun out, wrong
+way, stuck; ``info["intervention"]`` says which). ``truncated``: the laps are driven (``info["laps_done"]``),
+the lap's time limit or ``max_episode_steps``.
+
+``info``: ``cte_m`` (from the car's line, + = left), ``heading_error_deg`` (+ = turned left of the lap),
+``speed_kmh``, ``progress_m``, ``lap_progress`` (laps driven), ``t_s``, ``step``, ``expert_action`` (the
+autopilot's pure-pursuit steering for this state, as an action: the DAgger label), ``intervention``,
+``laps_done`` and, with ``jpeg=True``, ``jpeg`` (the centre frame's bytes as on the wire).
+
+:class:`OnnxPolicy` drives it with a model from ``rbc train`` through drive_server's pipeline:
+``policy = OnnxPolicy("models/pretrained/generalist.onnx"); action = policy(obs, info)``.
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+from tools.envs.config import DriveEnvConfig, RewardSpec
+from tools.envs.drive_env import DriveEnv
+from tools.envs.policy import OnnxPolicy
+
+ENV_ID = "rbc/Drive-v0"
+
+if ENV_ID not in registry:
+    register(id=ENV_ID, entry_point="tools.envs.drive_env:DriveEnv")
+
+__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "OnnxPolicy", "RewardSpec"]

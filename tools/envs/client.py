@@ -1,0 +1,173 @@
+"""The headless simulator as the environment sees it: start a run, apply a command for a step, look.
+
+Kept apart from the Gymnasium environment as gym-donkeycar keeps its simulator client apart from its
+``DonkeyEnv``: this module knows the simulator (:mod:`tools.sim.driving`), the environment only actions,
+observations and rewards. The physics, referee, cameras and JPEG are the simulator's and the wire's own,
+so a frame here is the frame ``rbc sim`` would send.
+
+A take-over (the referee's intervention) ends the step at once; the simulator has by then put the car
+back on the road, so what the step reports and shows is the car one physics frame before, where it
+left the road, hit the cone or spun.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from protocol import SpeedUnit, SteerCommand, encode_telemetry, parse_number
+from protocol.jpeg import decode_jpeg, encode_jpeg
+from protocol.units import from_kmh, to_kmh
+from tools.sim.driving.autopilot import Autopilot, AutopilotParams
+from tools.sim.driving.rules import angle_diff
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.simulation import Simulation
+from tools.sim.render.world import Pose
+from tools.sim.track.road import Projection
+from tools.sim.vehicle.kinematic import VehicleState
+
+#: The telemetry's speed unit: the stock simulator's, which drive_server assumes by default.
+WIRE_UNIT = SpeedUnit.MPH
+
+
+@dataclass(frozen=True)
+class StepReport:
+    """What one step of the simulator did."""
+
+    progress_m: float  # metres driven along the lap (before any take-over)
+    out_of_lane_s: float  # seconds with the car's body over its lane's edge
+    intervention: str  # "" or the referee's cause (tools.sim.driving.rules.Cause): off_road, cone, ...
+    laps_done: bool  # the run's laps are driven
+    time_out: bool  # the lap's time limit ran out
+
+
+@dataclass(frozen=True)
+class _Snapshot:
+    state: VehicleState  # rear-axle pose, speed, wheel angle
+    proj: Projection  # of the body centre on the centre line (track direction)
+    progress: float  # metres along the lap since the spawn
+
+
+class HeadlessSimClient:
+    """One car on one track, driven a step at a time; :meth:`start` begins a new run (an episode)."""
+
+    def __init__(self, track: str, camera: str, cameras: tuple[str, ...], jpeg: bool, *, laps: int = 1,
+                 vehicle: str = ScenarioConfig.vehicle, speed_limit_kmh: float = ScenarioConfig.speed_limit_kmh,
+                 control_hz: float = ScenarioConfig.control_hz, max_lap_time_s: float | None = None,
+                 light_intensity: float = 1.0, cones: int = 0, reverse: bool = False) -> None:
+        self.base = ScenarioConfig(track=track, laps=laps, light_intensity=light_intensity, cones=cones,
+                                   reverse=reverse, speed_limit_kmh=speed_limit_kmh, control_hz=control_hz,
+                                   max_lap_time_s=max_lap_time_s, vehicle=vehicle, camera=camera)
+        self.cameras, self.jpeg = cameras, jpeg
+        self.sim: Simulation | None = None
+        self.expert: Autopilot | None = None
+        self._view: _Snapshot | None = None
+
+    @property
+    def track_length_m(self) -> float:
+        return self._sim.track.length
+
+    @property
+    def _sim(self) -> Simulation:
+        if self.sim is None:
+            raise RuntimeError("HeadlessSimClient.start() was not called")
+        return self.sim
+
+    def start(self, seed: int, spawn_s: float | None = None, spawn_noise: bool = True, cone_seed: int = 0) -> None:
+        """A new run: the car at ``spawn_s`` metres along the track (None: the start line), ``seed`` drawing the
+        spawn's noise, the camera bumps, the track's per-frame look and the autopilot's driving line."""
+        config = replace(self.base, seed=seed, spawn_s=spawn_s, spawn_noise=spawn_noise, cone_seed=cone_seed)
+        self.sim = sim = Simulation(config)
+        self.expert = Autopilot(sim.track, sim.direction, sim.cones,
+                                replace(AutopilotParams(), speed_kmh=config.speed_limit_kmh), sim.params, seed=seed)
+        self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
+
+    def random_spawn_s(self, rng: np.random.Generator) -> float:
+        """A spawn point anywhere along the track, drawn from ``rng``."""
+        from tools.sim.track.files import get_track
+
+        return float(rng.uniform(0.0, get_track(self.base.track).length))
+
+    # --- stepping -----------------------------------------------------------------------------------
+    def step(self, command: SteerCommand, frames: int) -> StepReport:
+        """Apply ``command`` for ``frames`` physics frames, or until a take-over or the end of the run."""
+        sim = self._sim
+        track, direction = sim.track, sim.direction
+        lane_half = track.road_width / (2 * track.lanes) - 0.5 * sim.params.width_m  # the centre's room in the lane
+        dt = sim.params.dt
+        progress0 = sim.progress
+        outside = 0.0
+        cause = ""
+        sim.command = command
+        for _ in range(frames):
+            if sim.done:
+                break
+            before = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
+            taken_over = sim.last_intervention
+            sim.advance(1, command)
+            if sim.last_intervention is not taken_over:
+                cause = str(sim.last_intervention.cause)
+                self._view = before  # the simulator already put the car back: report where it was
+                break
+            if abs(sim.proj.cte * direction - sim.line_offset) > lane_half:
+                outside += dt
+        if not cause:
+            self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
+        laps_done = sim.done and bool(sim.laps) and len(sim.laps) >= sim.config.laps and sim.laps[-1].completed
+        return StepReport(progress_m=self._view.progress - progress0, out_of_lane_s=outside, intervention=cause,
+                          laps_done=laps_done, time_out=sim.done and not laps_done and not cause)
+
+    # --- looking ------------------------------------------------------------------------------------
+    def render(self) -> dict[str, np.ndarray]:
+        """The cameras' frames (RGB uint8, 160x320) at the car's pose, as the renderer draws them."""
+        sim = self._sim
+        st = self._view.state
+        half = 0.5 * sim.params.wheelbase_m  # the body centre is half a wheelbase ahead of the rear axle
+        pose = Pose(st.x + half * math.cos(st.yaw), st.y + half * math.sin(st.yaw), st.yaw)
+        pitch, roll = sim.camera_jitter()
+        return {cam: sim.renderer.render(pose, camera=cam, light_intensity=sim.config.light_intensity,
+                                         pitch_deg=pitch, roll_deg=roll) for cam in self.cameras}
+
+    def wire(self, rgb: np.ndarray) -> tuple[np.ndarray, bytes]:
+        """A frame as it arrives over the wire: JPEG at the track's quality (75 like Unity's), decoded by THE
+        decode (``protocol.jpeg``), and its JPEG bytes; with ``jpeg=False`` the rendered frame and no bytes."""
+        if not self.jpeg:
+            return rgb, b""
+        data = encode_jpeg(rgb, self._sim.jpeg_quality)
+        return decode_jpeg(data), data
+
+    # --- ground truth -------------------------------------------------------------------------------
+    def wire_speed(self) -> float:
+        """The speed the telemetry says (mph, four decimals), parsed as drive_server parses it."""
+        st = self._view.state
+        payload = encode_telemetry(math.degrees(st.steer), st.throttle, from_kmh(st.speed * 3.6, WIRE_UNIT), "")
+        return parse_number(payload["speed"], "speed")
+
+    def wire_speed_kmh(self) -> float:
+        return to_kmh(self.wire_speed(), WIRE_UNIT)
+
+    def expert_steering(self) -> float:
+        """The autopilot's steering for the car's state: pure pursuit of its driving line, -1..1 (+ = right).
+
+        The wanted steering, not the keyboard pulses the autopilot records datasets with: a function of the
+        state alone (and the run's driving line), which is what a DAgger label must be.
+        """
+        if self.expert is None:
+            raise RuntimeError("HeadlessSimClient.start() was not called")
+        return float(self.expert.wanted_steering(self._view.state))
+
+    def truth(self) -> dict[str, float]:
+        """Where the car is against the road: cross-track error from its line (m, + = left), heading error
+        (degrees, + = turned left of the lap direction), speed (km/h), progress (m, laps) and time (s)."""
+        sim, view = self._sim, self._view
+        lap_heading = view.proj.heading_rad if sim.direction > 0 else view.proj.heading_rad + math.pi
+        return {
+            "cte_m": view.proj.cte * sim.direction - sim.line_offset,
+            "heading_error_deg": math.degrees(angle_diff(view.state.yaw, lap_heading)),
+            "speed_kmh": view.state.speed * 3.6,
+            "progress_m": view.progress,
+            "lap_progress": view.progress / sim.track.length,
+            "t_s": sim.t,
+        }

@@ -1,0 +1,160 @@
+"""What defines a ``rbc/Drive-v0`` environment, and the reward's constants, each in one place.
+
+Every bad argument is a :class:`protocol.errors.BadValue` naming the argument, so ``gymnasium.make`` fails at
+once with a sentence rather than on the first step. Procedural worlds follow ``rbc collect``'s rule: an
+environment made for training refuses world seeds outside the training range unless told it is for evaluation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+from drive_server.control import ControlLaw
+from protocol.errors import BadValue
+from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.render.camera import RIGS
+from tools.sim.vehicle.kinematic import VEHICLE_KINDS
+
+CONTROLS = ("steer", "steer_throttle")
+PURPOSES = ("train", "eval")
+SPAWNS = ("start", "random")
+
+
+@dataclass(frozen=True)
+class RewardSpec:
+    """The reward per step, as data: progress pays, leaving the lane and being taken over cost.
+
+    reward = progress_per_m * metres driven along the lap in the step
+             - out_of_lane_per_s * seconds of the step with the car's body over its lane's edge
+             - termination (once, on the step a take-over ends the episode)
+
+    A step is 1/15 s (``control_hz``), about 0.46 m at the default 25 km/h, so a step fully out of the lane
+    costs about a third of what it earns, and a take-over (leaving the road, hitting a cone, spinning out,
+    driving the wrong way, standing still) the progress of 10 m.
+    """
+
+    progress_per_m: float = 1.0
+    out_of_lane_per_s: float = 2.5
+    termination: float = 10.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise BadValue(f"reward {f.name} must be a finite number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class DriveEnvConfig:
+    """The keyword arguments of ``gymnasium.make("rbc/Drive-v0", ...)`` (defaults: lake, one camera, the paper's
+    coupled control law at drive_server's 25 km/h). Angles in degrees, speeds in km/h."""
+
+    track: str | None = None  # built-in name, track file path or world:SEED; None: lake (or world_seed's world)
+    world_seed: int | None = None  # a procedural world instead of track
+    purpose: str = "train"  # "train" refuses evaluation worlds (rbc collect's rule); "eval" allows every seed
+    camera: str = ScenarioConfig.camera  # the camera rig (tools.sim.render.camera.RIGS)
+    cameras: int = 1  # 1: centre only; 3: a Dict observation of centre, left and right
+    control: str = "steer"  # "steer": throttle and brake from Eq. 14 as drive_server; "steer_throttle": both actions
+    speed_limit_kmh: float = ControlLaw.speed_limit_kmh  # v_l of Eq. 14; a governor in steer_throttle
+    steer_limit_deg: float = ControlLaw.steer_limit_deg  # delta of Eq. 14
+    tau: float = ControlLaw.tau  # gain of Eq. 14
+    jpeg: bool = True  # observe the frame after the wire's JPEG round trip (what drive_server and recordings see)
+    laps: int = 1  # the episode is truncated after this many laps
+    max_episode_steps: int | None = None  # truncated after this many steps (None: only the lap and its time limit)
+    max_lap_time_s: float | None = None  # None: the simulator's (4x a lap at the speed limit, at least 120 s)
+    vehicle: str = ScenarioConfig.vehicle  # "dynamic" (tyre slip) or "kinematic"
+    control_hz: float = ScenarioConfig.control_hz  # steps per simulated second (must divide 60)
+    spawn: str = "start"  # "start": the track's start line; "random": anywhere along the lap (drawn from the seed)
+    spawn_noise: bool = True  # up to 0.5 m sideways and 3 degrees of yaw off the line, drawn from the seed
+    action_delay: int = 0  # 1: each action applies one step late, as with Unity's two frames in flight
+    light_intensity: float = ScenarioConfig.light_intensity
+    cones: int = 0
+    reverse: bool = False  # drive the lap the other way round
+    reward: RewardSpec = field(default_factory=RewardSpec)
+
+    def __post_init__(self) -> None:
+        _choice("camera", self.camera, tuple(RIGS))
+        _choice("control", self.control, CONTROLS)
+        _choice("purpose", self.purpose, PURPOSES)
+        _choice("spawn", self.spawn, SPAWNS)
+        _choice("vehicle", self.vehicle, VEHICLE_KINDS)
+        if self.cameras not in (1, 3):
+            raise BadValue(f"cameras must be 1 or 3, got {self.cameras!r}")
+        for name in ("speed_limit_kmh", "steer_limit_deg", "control_hz"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+                raise BadValue(f"{name} must be a positive number, got {value!r}")
+        if not 0.0 <= self.tau <= 1.0:
+            raise BadValue(f"tau must be in [0, 1], got {self.tau!r}")
+        ratio = ScenarioConfig.sim_fps / self.control_hz
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise BadValue(f"control_hz must divide the simulator's {ScenarioConfig.sim_fps} Hz, got {self.control_hz}")
+        for name in ("laps", "max_episode_steps", "cones", "action_delay", "world_seed"):
+            value = getattr(self, name)
+            low = {"laps": 1, "max_episode_steps": 1}.get(name, 0)
+            if value is None and name in ("max_episode_steps", "world_seed"):
+                continue
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise BadValue(f"{name} must be an integer >= {low}, got {value!r}")
+        if self.action_delay > 1:
+            raise BadValue(f"action_delay must be 0 or 1 (Unity keeps two frames in flight), got {self.action_delay}")
+        if self.max_lap_time_s is not None and not (math.isfinite(self.max_lap_time_s) and self.max_lap_time_s > 0):
+            raise BadValue(f"max_lap_time_s must be a positive number, got {self.max_lap_time_s!r}")
+        if not math.isfinite(self.light_intensity) or self.light_intensity < 0:
+            raise BadValue(f"light_intensity must be a number >= 0, got {self.light_intensity!r}")
+        if self.track is not None and self.world_seed is not None:
+            raise BadValue("give track or world_seed, not both",
+                           "world_seed=S is the procedural world S; track='world:S' names the same world")
+        if not isinstance(self.reward, RewardSpec):
+            raise BadValue(f"reward must be a tools.envs.RewardSpec, got {type(self.reward).__name__}")
+
+    @property
+    def track_name(self) -> str:
+        """The track as ``rbc sim --track`` names it: a built-in name, a path or ``world:SEED``."""
+        if self.world_seed is not None:
+            return f"world:{self.world_seed}"
+        return str(self.track) if self.track is not None else ScenarioConfig.track
+
+    @property
+    def frames_per_step(self) -> int:
+        return round(ScenarioConfig.sim_fps / self.control_hz)
+
+    def law(self) -> ControlLaw:
+        """Eq. 14 with this environment's parameters (drive_server's own class)."""
+        return ControlLaw(speed_limit_kmh=self.speed_limit_kmh, steer_limit_deg=self.steer_limit_deg, tau=self.tau)
+
+
+def _choice(name: str, value: object, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise BadValue(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+
+
+def config_from_kwargs(kwargs: dict[str, object]) -> DriveEnvConfig:
+    """The config of ``DriveEnv(**kwargs)``; an unknown keyword is a BadValue listing the known ones."""
+    known = {f.name for f in fields(DriveEnvConfig)}
+    unknown = sorted(set(kwargs) - known)
+    if unknown:
+        raise BadValue(f"unknown argument(s) of rbc/Drive-v0: {', '.join(unknown)}",
+                       f"known: render_mode, {', '.join(sorted(known))}")
+    return DriveEnvConfig(**kwargs)  # type: ignore[arg-type]
+
+
+def resolve_track(config: DriveEnvConfig) -> str:
+    """The track file or name the simulator loads, after ``rbc collect``'s refusal of held-out worlds.
+
+    ``purpose="train"`` with a world seed outside the training range is refused (a model must never see the
+    worlds it is evaluated on); ``purpose="eval"`` allows it.
+    """
+    from tools.sim.collect.worlds import training_seed_problem
+    from tools.sim.track.files import world_seed_of
+    from tools.sim.worldgen.generate import resolve_track_name
+
+    name = config.track_name
+    seed = world_seed_of(name)  # a malformed world:SEED is a TrackError
+    if seed is not None and config.purpose == "train":
+        problem = training_seed_problem(seed, 1)
+        if problem:
+            raise BadValue(problem, "pick a world_seed in the training range, or make the environment with "
+                                    "purpose='eval' to evaluate on it (never train on it)")
+    return resolve_track_name(name)

@@ -1,0 +1,148 @@
+"""``rbc/Drive-v0``: the headless simulator as a Gymnasium environment (see :mod:`tools.envs` for the API).
+
+One step is one command of the lock-step simulator (1/15 s, four 60 Hz physics frames): the action becomes a
+steer command (in ``control="steer"`` its throttle and brake come from drive_server's Eq. 14 on the speed the
+telemetry reports), the simulator runs it, and the observation is the next camera frame as the wire delivers it.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
+from protocol.errors import BadValue
+from tools.envs.client import HeadlessSimClient
+from tools.envs.config import config_from_kwargs, resolve_track
+
+FRAME_SHAPE = (FRAME_HEIGHT, FRAME_WIDTH, 3)
+
+
+class DriveEnv(gym.Env):
+    """The headless simulator on one track or procedural world; keyword arguments are
+    :class:`tools.envs.config.DriveEnvConfig`'s fields plus ``render_mode`` (None or "rgb_array")."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise BadValue(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self.config = config = config_from_kwargs(kwargs)
+        self.metadata = {**self.metadata, "render_fps": config.control_hz}
+        self.law = config.law()
+        frame = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
+        self.camera_names = CAMERAS if config.cameras == 3 else ("center",)
+        self.observation_space = spaces.Dict({c: frame for c in self.camera_names}) if config.cameras == 3 else frame
+        size = 1 if config.control == "steer" else 2
+        self.action_space = spaces.Box(-1.0, 1.0, (size,), np.float32)
+        self.client = HeadlessSimClient(
+            resolve_track(config), config.camera, self.camera_names, config.jpeg, laps=config.laps,
+            vehicle=config.vehicle, speed_limit_kmh=config.speed_limit_kmh, control_hz=config.control_hz,
+            max_lap_time_s=config.max_lap_time_s, light_intensity=config.light_intensity, cones=config.cones,
+            reverse=config.reverse)
+        self._pending: deque[SteerCommand] = deque()
+        self._steps = 0
+        self._frame: np.ndarray | None = None  # the centre camera as rendered, for render()
+
+    # --- the Gymnasium API --------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """A new episode; ``seed`` makes it and every step after it reproducible. ``options``: ``spawn_s``
+        (metres along the track to start at), ``cone_seed`` (the cones' layout, with ``cones=N``)."""
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - {"spawn_s", "cone_seed"})
+        if unknown:
+            raise BadValue(f"unknown reset option(s): {', '.join(unknown)} (known: spawn_s, cone_seed)")
+        run_seed = int(self.np_random.integers(1, 2**31 - 1))  # never 0: the simulator's "no spawn noise" seed
+        spawn_s = options.get("spawn_s")
+        if spawn_s is None and self.config.spawn == "random":
+            spawn_s = self.client.random_spawn_s(self.np_random)
+        self.client.start(run_seed, spawn_s=None if spawn_s is None else float(spawn_s),
+                          spawn_noise=self.config.spawn_noise, cone_seed=int(options.get("cone_seed", 0)))
+        self._pending = deque([SteerCommand(0.0, 0.0)] * self.config.action_delay)
+        self._steps = 0
+        obs, jpeg = self._observe()
+        return obs, self._info("", False, jpeg)
+
+    def step(self, action: Any):
+        command = self.command(action)
+        if self._pending:
+            self._pending.append(command)
+            command = self._pending.popleft()
+        report = self.client.step(command, self.config.frames_per_step)
+        self._steps += 1
+        r = self.config.reward
+        terminated = bool(report.intervention)
+        reward = r.progress_per_m * report.progress_m - r.out_of_lane_per_s * report.out_of_lane_s
+        if terminated:
+            reward -= r.termination
+        limit = self.config.max_episode_steps
+        truncated = not terminated and (report.laps_done or report.time_out
+                                        or (limit is not None and self._steps >= limit))
+        obs, jpeg = self._observe()
+        return obs, float(reward), terminated, truncated, self._info(report.intervention, report.laps_done, jpeg)
+
+    def render(self) -> np.ndarray | None:
+        """The centre camera as rendered (before the wire's JPEG), with ``render_mode="rgb_array"``."""
+        if self.render_mode != "rgb_array":
+            return None
+        return None if self._frame is None else self._frame.copy()
+
+    def close(self) -> None:
+        self.client.sim = None
+        self.client.expert = None
+
+    # --- what the agent gets ------------------------------------------------------------------------
+    def command(self, action: Any) -> SteerCommand:
+        """The steer command an action asks for: steering as given; throttle and brake from Eq. 14 on the
+        telemetry speed (``control="steer"``, as drive_server's pipeline computes them) or the second action,
+        cut to 0 at the speed limit (``control="steer_throttle"``)."""
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != self.action_space.shape or not np.isfinite(a).all():
+            raise BadValue(f"action must be {self.action_space.shape[0]} finite number(s) in [-1, 1], got {action!r}")
+        a = np.clip(a, -1.0, 1.0)
+        steering = float(a[0])
+        speed_kmh = self.client.wire_speed_kmh()
+        if self.config.control == "steer":
+            throttle = self.law.command(steering * self.law.steer_limit_deg, speed_kmh)
+        else:
+            throttle = float(a[1])
+            if speed_kmh >= self.config.speed_limit_kmh:
+                throttle = min(throttle, 0.0)
+        return SteerCommand(steering=steering, throttle=throttle)
+
+    def expert_action(self) -> np.ndarray:
+        """The autopilot's action for the current state: its pure-pursuit steering, and (``steer_throttle``)
+        Eq. 14's throttle for that steering, the throttle ``control="steer"`` would apply."""
+        steering = self.client.expert_steering()
+        if self.config.control == "steer":
+            return np.array([steering], np.float32)
+        throttle = self.law.command(steering * self.law.steer_limit_deg, self.client.wire_speed_kmh())
+        return np.array([steering, throttle], np.float32)
+
+    def _observe(self) -> tuple[np.ndarray | dict[str, np.ndarray], bytes]:
+        frames = self.client.render()
+        self._frame = frames["center"]
+        seen = {}
+        jpeg = b""
+        for name, rgb in frames.items():
+            seen[name], data = self.client.wire(rgb)
+            if name == "center":
+                jpeg = data
+        obs = seen if self.config.cameras == 3 else seen["center"]
+        return obs, jpeg
+
+    def _info(self, intervention: str, laps_done: bool, jpeg: bytes) -> dict[str, Any]:
+        info: dict[str, Any] = self.client.truth()
+        info["expert_action"] = self.expert_action()
+        info["intervention"] = intervention
+        info["laps_done"] = laps_done
+        info["step"] = self._steps
+        if jpeg:
+            info["jpeg"] = jpeg  # the centre frame's JPEG as sent on the wire (OnnxPolicy decodes it as drive_server)
+        return info
