@@ -65,3 +65,100 @@ def test_bad_settings_are_refused(tmp_path: Path, flag: list[str]) -> None:
                           "--name", "0xR4Y", *flag], capture_output=True, text=True)
     assert out.returncode == 2 and "must be" in out.stderr and "Traceback" not in out.stderr
     assert not json.dumps(out.stdout).count("|")
+
+
+# --------------------------------------------------------------------------- a cross-validation that survives a stop
+
+
+def _two_recordings(tmp_path: Path) -> tuple[Path, list[PublicRecording]]:
+    import shutil
+
+    root = tmp_path / "real"
+    root.mkdir()
+    for name in ("one", "two"):
+        shutil.copytree(DATA / "udacity-sample", root / name)
+    return root, [_rec("one", fold="A"), _rec("two", fold="B")]
+
+
+def test_a_resumed_crossval_takes_finished_recordings_from_its_journal_and_equals_the_clean_run(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from tools.realdata import crossval
+
+    root, recs = _two_recordings(tmp_path)
+    path = tmp_path / "cv.journal.jsonl"
+    clean = crossval.score_all(recs, root, str(MODEL), journal=crossval.ScoreJournal(path))
+    lines = path.read_text(encoding="utf-8").splitlines()
+    assert len(lines) == 2
+    path.write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2], encoding="utf-8")  # killed mid-line
+    scored = []
+    real = crossval.score_recording
+    monkeypatch.setattr(crossval, "score_recording", lambda rec, *a: scored.append(rec.name) or real(rec, *a))
+    resumed = crossval.score_all(recs, root, str(MODEL), journal=crossval.ScoreJournal(path))
+    assert scored == ["two"]  # the finished one is never redone; the torn one is
+    assert resumed == clean
+    assert crossval.ScoreJournal(path).get(next(iter(crossval.ScoreJournal(path).scores))) is not None
+    assert len(crossval.ScoreJournal(path).scores) == 2  # the torn fragment did not swallow the new line
+
+
+def test_a_retrained_model_at_the_same_path_is_scored_again(tmp_path: Path) -> None:
+    from tools.realdata import crossval
+
+    root, recs = _two_recordings(tmp_path)
+    model = tmp_path / "m.onnx"
+    model.write_bytes(MODEL.read_bytes())
+    key = crossval.score_key("folds", "one", model, True, None, None)
+    assert key == crossval.score_key("folds", "one", model, True, None, None)
+    model.write_bytes(MODEL.read_bytes() + b"\0")
+    assert key != crossval.score_key("folds", "one", model, True, None, None)
+    assert key != crossval.score_key("folds", "one", MODEL, False, None, None)
+
+
+def test_the_command_writes_its_figures_and_resumes_to_the_same_json(tmp_path: Path) -> None:
+    root = tmp_path / "real"
+    root.mkdir()
+    for name in ("0xR4Y", "2002Esala"):  # folds A and B of the manifest
+        (root / name).symlink_to(DATA / "udacity-sample")
+    out = tmp_path / "cv.json"
+    cmd = [sys.executable, "-m", "tools.cli", "data", "crossval", "--root", str(root), "--models", str(MODEL),
+           "--name", "0xR4Y", "--name", "2002Esala", "--workers", "1", "--json", str(out)]
+    first = subprocess.run(cmd, capture_output=True, text=True)
+    assert first.returncode == 0, first.stderr
+    clean = json.loads(out.read_text(encoding="utf-8"))
+    assert clean["folds_done"] == ["A", "B"] and len(clean["folds"]) == 2
+    journal = tmp_path / "cv.journal.jsonl"
+    journal.write_text(journal.read_text(encoding="utf-8").splitlines()[0] + "\n", encoding="utf-8")  # B unfinished
+    out.unlink()
+    again = subprocess.run(cmd, capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr
+    assert json.loads(out.read_text(encoding="utf-8")) == clean
+    assert again.stdout.split("json")[0] == first.stdout.split("json")[0]  # the same tables
+
+
+def test_a_finished_fold_is_never_trained_again_and_an_interrupted_one_continues(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import models.training.train as train_module
+    from tools.realdata import foldtrain
+
+    root, recs = _two_recordings(tmp_path)
+    recipe = tmp_path / "tiny.toml"
+    recipe.write_text("[training]\nepochs = 1\nmax_steps_per_epoch = 2\n[augmentation]\naug_loops = 1\n",
+                      encoding="utf-8")
+    runs = tmp_path / "runs"
+    model = foldtrain.train_fold(str(recipe), "B", recs, root, runs, progress=False)
+    assert model == runs / "fold-B" / "model.onnx" and foldtrain.is_finished(runs / "fold-B")
+    config = json.loads((runs / "fold-B" / "config.json").read_text(encoding="utf-8"))
+    assert config["config"]["val_data"] == [str(root / "two")] and config["config"]["data"] == [str(root / "one")]
+
+    calls = []
+
+    def fake_train(cfg, resume=False):
+        calls.append(resume)
+        return type("R", (), {"interrupted": True, "onnx": None})()
+
+    monkeypatch.setattr(train_module, "train", fake_train)
+    assert foldtrain.train_fold(str(recipe), "B", recs, root, runs) == model  # finished: not trained
+    assert calls == []
+    (runs / "fold-A").mkdir()
+    (runs / "fold-A" / "config.json").write_text("{}", encoding="utf-8")  # a run a stop interrupted
+    assert foldtrain.train_fold(str(recipe), "A", recs, root, runs) is None
+    assert calls == [True]  # continued from its checkpoint, not started afresh

@@ -8,8 +8,11 @@ to the recipe, as one table: the README's and the model card's figures come from
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -111,24 +114,38 @@ def _closed_loop(data: Path, model: Path, rules: LoopRules | None,
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
               rules: LoopRules | None = None, workers: int = 1,
-              on_done: Callable[[int, int], None] | None = None, smooth: float | None = None) -> list[RecordingScore]:
-    """Every recording under its fold's model, in ``recs`` order; ``workers`` processes at once."""
+              on_done: Callable[[int, int], None] | None = None, smooth: float | None = None,
+              journal: ScoreJournal | None = None, what: str = "folds") -> list[RecordingScore]:
+    """Every recording under its fold's model, in ``recs`` order; ``workers`` processes at once. With a
+    ``journal``, a recording already scored under the same key is taken from it and each new score is added
+    to it as soon as it is finished (a stopped run resumes there)."""
     jobs = [(rec, root, model_for(pattern, rec), closed_loop, rules, smooth) for rec in recs]
-    out: list[RecordingScore | None] = [None] * len(jobs)
-    if workers <= 1:
-        for i, job in enumerate(jobs):
-            out[i] = score_recording(*job)
-            if on_done:
-                on_done(i + 1, len(jobs))
+    keys = [score_key(what, rec.name, model, closed_loop, rules, smooth) for rec, _, model, *_ in jobs]
+    out: list[RecordingScore | None] = [journal.get(k) if journal else None for k in keys]
+    todo = [i for i, s in enumerate(out) if s is None]
+    finished = len(jobs) - len(todo)
+
+    def done(i: int, score: RecordingScore) -> None:
+        nonlocal finished
+        out[i] = score
+        if journal is not None:
+            journal.add(keys[i], score)
+        finished += 1
+        if on_done:
+            on_done(finished, len(jobs))
+
+    if on_done:
+        on_done(finished, len(jobs))
+    if workers <= 1 or len(todo) <= 1:
+        for i in todo:
+            done(i, score_recording(*jobs[i]))
         return [r for r in out if r is not None]
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(score_recording, *job): i for i, job in enumerate(jobs)}
-        for done, future in enumerate(as_completed(futures), start=1):
-            out[futures[future]] = future.result()
-            if on_done:
-                on_done(done, len(jobs))
+        futures = {pool.submit(score_recording, *jobs[i]): i for i in todo}
+        for future in as_completed(futures):
+            done(futures[future], future.result())
     return [r for r in out if r is not None]
 
 
@@ -195,3 +212,60 @@ def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScor
             row += f" {mse(p)} | {p.pearson_r:.2f} | {loop(p)} |" if p else " – | – | – |"
         lines.append(row)
     return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- a cross-validation that survives a stop
+# Every finished recording's score is appended (and flushed) to a journal the moment it is finished, keyed by
+# everything that determines it: the recording, the model file's content (a retrained fold model is scored
+# afresh), the closed-loop rules and the smoothing. A run started again with the same journal skips what is in
+# it; every score depends only on its key, so a resumed run gives the clean run's figures. A line torn by a
+# kill is ignored (and that recording scored again).
+
+#: Beside the JSON record: ``OUT.json`` keeps its journal in ``OUT.journal.jsonl``.
+SUFFIX = ".journal.jsonl"
+
+
+def journal_for(json_path: Path) -> Path:
+    return json_path.with_name(json_path.stem + SUFFIX)
+
+
+def model_digest(path: Path) -> str:
+    """The model file's content, so the same path holding a retrained model is not taken for the old one."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: Any, smooth: float | None) -> str:
+    """Everything a recording's score depends on, as one canonical string."""
+    return json.dumps({"what": what, "recording": name, "model": model_digest(model), "closed_loop": closed_loop,
+                       "rules": asdict(rules) if rules is not None else None, "smooth": smooth}, sort_keys=True)
+
+
+class ScoreJournal:
+    """Finished scores by key, read from ``path`` at start and appended to as recordings finish."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+        self.scores: dict[str, RecordingScore] = {}
+        if path is None or not path.exists():
+            return
+        names = {f.name for f in fields(RecordingScore)}
+        for line in path.read_text(encoding="utf-8").splitlines():
+            try:
+                entry = json.loads(line)
+                self.scores[entry["key"]] = RecordingScore(**{k: v for k, v in entry["score"].items() if k in names})
+            except (ValueError, KeyError, TypeError):  # a line torn by a kill: that recording is scored again
+                continue
+
+    def get(self, key: str) -> RecordingScore | None:
+        return self.scores.get(key)
+
+    def add(self, key: str, score: RecordingScore) -> None:
+        self.scores[key] = score
+        if self.path is None:
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        torn = self.path.exists() and self.path.stat().st_size and not self.path.read_bytes().endswith(b"\n")
+        with self.path.open("a", encoding="utf-8") as fh:
+            fh.write(("\n" if torn else "") + json.dumps({"key": key, "score": score.as_dict()}) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
