@@ -41,6 +41,7 @@ def shell_commands(path: Path) -> list[tuple[int, str]]:
             continue
         pending = ""
         text = re.split(r"\s#\s|\s{2,}#", text)[0]  # a comment after the command
+        text = re.split(r"\s>\s", text)[0]  # its output redirected to a file
         text = SUBSTITUTION.sub("--data DIR", text)  # $(for d in ...; do printf -- '--data %s ' ...; done)
         for part in re.split(r"\s(?:&&|\|\||;|\|)\s", text):
             part = part.strip().removesuffix(" &").strip()

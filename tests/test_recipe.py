@@ -141,7 +141,7 @@ OLD_FLAGS = ("--behavior", "--arch", "--approach", "--aug-loops", "--batch-size"
 def test_a_flag_that_moved_into_recipes_says_where_it_went(flag, tmp_path, capsys) -> None:
     err = _fails(["train", "--data", str(SAMPLE), flag, "1", "--out", str(tmp_path / "run")], capsys)
     if flag in ("--label-lag", "--recovery-distance"):
-        assert err == f"rbc train: error: {flag} was removed: it was measured useless (docs/recordings.md)"
+        assert err == f"rbc train: error: {flag} was removed: it was measured useless (docs/experiments.md)"
     else:
         key = RENAMED.get(flag[2:].replace("-", "_"), flag[2:].replace("-", "_"))
         section = next(s for s, keys in SECTIONS.items() if key in keys)

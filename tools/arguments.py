@@ -111,4 +111,4 @@ def add_moved_to_recipe_flags(parser: argparse.ArgumentParser) -> None:
                                 f"({command} --recipe FILE; rbc train --recipe unity --print shows one)")
     for key in REMOVED:
         parser.add_argument("--" + key.replace("_", "-"), action=MovedToRecipe,
-                            where="was removed: it was measured useless (docs/recordings.md)")
+                            where="was removed: it was measured useless (docs/experiments.md)")

@@ -5,7 +5,9 @@ gets every ``rbc`` subcommand's and ``drive_server``'s own ``--help`` text, buil
 the commands use, so the reference cannot drift from the flags; ``<!-- generated: api -->`` gets the
 signatures and docstrings of :data:`API`, the few Python entry points a user scripts against; and
 ``<!-- generated: readme -->`` (the home page) gets the README, its links made relative to ``docs/``, so
-the front door is written once.
+the front door is written once; ``<!-- generated: models -->`` gets a table of the bundled models read from
+their own ONNX metadata; and every ``<!-- results NAME TABLE -->`` block is rendered afresh from its result
+record (``tools/results.py``), so a results table cannot differ from the figures that were measured.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import Any
 README_MARKER = "<!-- generated: readme -->"
 COMMANDS_MARKER = "<!-- generated: commands -->"
 API_MARKER = "<!-- generated: api -->"
+MODELS_MARKER = "<!-- generated: models -->"
 #: Width of the help texts (argparse wraps to the terminal; the page must not depend on the builder's).
 HELP_COLUMNS = 80
 
@@ -102,6 +105,35 @@ def api_markdown() -> str:
     return "\n".join(_entry(path) for path in API)
 
 
+def models_markdown() -> str:
+    """One row per bundled model, every cell read from the model file's own metadata (``rbc.model``)."""
+    import json
+
+    import onnxruntime as ort
+
+    from drive_server.models_dir import bundled_models
+
+    lines = ["| model | network | parameters | behavior | approach | camera rig | training samples | answer |",
+             "|---|---|---|---|---|---|---|---|"]
+    for path in bundled_models():
+        meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
+        record = json.loads(meta.custom_metadata_map.get("rbc.model", "{}"))
+        serving = json.loads(meta.custom_metadata_map.get("rbc.serving", "{}"))
+        answer = []
+        if str(record.get("mirror_average")).lower() == "true":
+            answer.append("mirror-averaged")
+        if str(record.get("output_scale", 1)) not in ("1.0", "1"):
+            answer.append(f"times {record['output_scale']}")
+        if "smooth" in serving:
+            answer.append(f"smoothed {serving['smooth']}")
+        params = f"{int(record['parameters']):,}" if record.get("parameters") else "–"
+        samples = f"{int(record['train_samples']):,}" if record.get("train_samples") else "–"
+        lines.append(f"| `{path.name}` | {record.get('arch', '–')} | {params} | {record.get('behavior', '–')} | "
+                     f"{record.get('approach', '–')} | {record.get('camera_rig') or 'classic'} | {samples} | "
+                     f"{', '.join(answer) or 'as trained'} |")
+    return "\n".join(lines) + "\n"
+
+
 def readme_markdown(readme: Path) -> str:
     """The README as a page of the site: links into ``docs/`` made relative, the repository's license kept."""
     return readme.read_text(encoding="utf-8").replace("](docs/", "](")
@@ -116,4 +148,10 @@ def on_page_markdown(markdown: str, page: Any = None, config: Any = None, files:
         markdown = markdown.replace(COMMANDS_MARKER, commands_markdown())
     if API_MARKER in markdown:
         markdown = markdown.replace(API_MARKER, api_markdown())
+    if MODELS_MARKER in markdown:
+        markdown = markdown.replace(MODELS_MARKER, models_markdown())
+    if "<!-- results " in markdown:
+        from tools.results import fill
+
+        markdown = fill(markdown)
     return markdown

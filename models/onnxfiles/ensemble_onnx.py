@@ -1,7 +1,7 @@
 """Average several ONNX steering models into one file: the ensemble answers the mean of its members' steering.
 
 Models that err differently on a driver they never saw gain from their mean, which keeps what they agree on
-(two seeds of the Unity recipe err much alike: +0.005 of r, docs/recordings.md). The members must read the
+(two seeds of the Unity recipe err much alike: +0.005 of r, docs/experiments.md). The members must read the
 same input through the same preprocessing contract, so drive_server decodes and crops the frame once and
 the one graph runs every member on it (ONNX ``Mean``). Verified against the members with ONNX Runtime
 before the file is kept.

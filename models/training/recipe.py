@@ -185,7 +185,7 @@ def recipe_toml(config: TrainConfig, source: str | None = None) -> str:
 def _belongs(key: str, section: str | None = None) -> str:
     """Where a misplaced, renamed or removed key went, for the error line ('' if nowhere)."""
     if key in REMOVED:
-        return "; that knob was removed (measured useless, docs/recordings.md)"
+        return "; that knob was removed (measured useless, docs/experiments.md)"
     new = RENAMED.get(key, key)
     if new in SECTION_OF and (new != key or SECTION_OF[new] != section):
         return f"; did you mean [{SECTION_OF[new]}] {new}?"

@@ -32,7 +32,7 @@ SCALE_BRIGHTNESS_RANGE = 0.5
 LEGACY = {"split": "random", "export": "last"}
 #: Keys of stored runs renamed since (old -> new), so run configs written before still load.
 RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "serve_smoothing"}
-#: Knobs removed because they were measured useless (docs/recordings.md), with the value that did nothing: a stored
+#: Knobs removed because they were measured useless (docs/experiments.md), with the value that did nothing: a stored
 #: run holding that value still loads, one holding another cannot be reproduced any more.
 REMOVED = {"label_lag": 0, "recovery_distance": None}
 EXPORTS = ("best", "last")
@@ -169,7 +169,7 @@ class TrainConfig:
             if key in REMOVED:
                 if value != REMOVED[key]:
                     raise BadValue(f"{source}: {key} = {value!r}: that knob was removed (measured useless, "
-                                   f"docs/recordings.md), so this version cannot rebuild the run")
+                                   f"docs/experiments.md), so this version cannot rebuild the run")
             elif key not in known:
                 raise BadValue(f"{source}: unknown key {key!r} (known: {', '.join(known)})")
             else:

@@ -31,7 +31,7 @@ UDACITY_EDGES = {
 #: Red-and-white kerbs on sharp curves: share of worlds (the real lake has them on most curves).
 KERB_SHARE = {"udacity_lake": 0.8}
 #: Fine texture grain of the ground, per theme (the real tracks' asphalt is coarse; the lake's near road
-#: matched the real one's edge density at about 3x, docs/simulator.md).
+#: matched the real one's edge density at about 3x, docs/results.md: rbc realism).
 GRAIN = {"udacity_lake": (2.0, 3.0), "udacity_jungle": (1.0, 2.5), "udacity_mountain": (1.5, 3.0)}
 DENSITY_PER_KM = (("bare", 0.12, 0, 0), ("sparse", 0.33, 30, 120), ("medium", 0.33, 120, 320),
                   ("dense", 0.22, 320, 650))
