@@ -32,8 +32,11 @@ def test_a_lake_recording_is_scored_open_and_closed_loop() -> None:
     assert -1 <= s.r_to_intent <= 1 and s.r_to_intent != s.pearson_r and 0 < s.intent_r < 1
     assert s.eta is not None and 0 <= s.eta <= 100 and s.interventions >= 0 and s.seconds_per_takeover > 0
     assert s.off_road_s is not None and s.off_road_s >= 0 and "off_road_s" in s.as_dict()  # as drive-log's JSON
-    jungle = score_recording(_rec(track="jungle"), DATA, MODEL)  # hills: not re-projected over flat ground
-    assert jungle.eta is None and jungle.off_road_s is None and jungle.mse == s.mse
+    # issue 43: the jungle and the mountain are driven too, their road found by the manifest's track's profile
+    jungle = score_recording(_rec(track="jungle"), DATA, MODEL)
+    assert jungle.eta is not None and jungle.off_road_s is not None and jungle.mse == s.mse
+    open_loop = score_recording(_rec(track="mountain"), DATA, MODEL, closed_loop=False)
+    assert open_loop.eta is None and open_loop.off_road_s is None and open_loop.mse == s.mse
 
 
 def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
@@ -111,6 +114,8 @@ def test_a_retrained_model_at_the_same_path_is_scored_again(tmp_path: Path) -> N
     model.write_bytes(MODEL.read_bytes() + b"\0")
     assert key != crossval.score_key("folds", "one", model, True, None, None)
     assert key != crossval.score_key("folds", "one", MODEL, False, None, None)
+    same = crossval.score_key("folds", "one", MODEL, True, None, None, code="git abc")
+    assert same != crossval.score_key("folds", "one", MODEL, True, None, None, code="git abd")  # the measure changed
 
 
 def test_the_command_writes_its_figures_and_resumes_to_the_same_json(tmp_path: Path) -> None:

@@ -245,3 +245,20 @@ def test_onnx_policy_drives_lake_through_drive_servers_pipeline():
         total += reward
         assert not terminated and not truncated
     assert info["progress_m"] > 150 and total > 140 and abs(info["cte_m"]) < 1.0
+
+
+def test_without_terminate_on_takeover_the_episode_goes_on_from_where_the_car_was_put_back():
+    env = DriveEnv(track="lake", jpeg=False, terminate_on_takeover=False, reward=RewardSpec(termination=7.0))
+    obs, info = env.reset(seed=0)
+    for _ in range(400):
+        obs, reward, terminated, truncated, info = env.step([-0.5])  # half lock left: off the road, as above
+        assert not terminated and not truncated
+        if info["intervention"]:
+            break
+    assert info["intervention"] == "off_road" and reward < -6.0  # the penalty, but no end
+    assert abs(info["cte_m"]) < 0.5 and abs(info["heading_error_deg"]) < 1.0  # back on the line, aligned
+    taken_at = info["step"]
+    for _ in range(30):  # the expert drives on from there
+        obs, reward, terminated, truncated, info = env.step(info["expert_action"])
+        assert not terminated and info["intervention"] == ""
+    assert info["step"] == taken_at + 30 and reward > 0 and abs(info["cte_m"]) < 0.5

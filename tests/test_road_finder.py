@@ -12,6 +12,7 @@ from test_road_edges import _drive, _render
 from protocol.camera import pitch_matrix
 from tools.drivelog.camera import DEFAULT_CAMERA
 from tools.drivelog.loop import LoopRules, drive
+from tools.drivelog.pitch import frame_pitch
 from tools.drivelog.road import estimate_road
 from tools.drivelog.road_view import Asphalt, _grid, frame_edges
 from tools.drivelog.track import TRACK_PROFILES, detect_track
@@ -121,17 +122,18 @@ def test_a_jungle_edge_line_still_ends_the_road() -> None:
 
 
 def _render_jungle(left: float, right: float, seed: int, shade_from: float | None = None,
-                   dash_phase: float = 0.0) -> np.ndarray:
+                   dash_phase: float = 0.0, camera_x: float = 0.0, pitch_deg: float | None = None) -> np.ndarray:
     """A centre frame of a straight jungle road: white edge lines at ``left`` and ``right`` (m, + right), a dashed
     white centre line between them (3 m dashes, 3 m gaps), grass beyond; ``shade_from``: the road shaded (dark,
-    a little blue) from there to its right edge, as a rock wall's shadow."""
+    a little blue) from there to its right edge, as a rock wall's shadow. ``camera_x``: the camera that far to
+    the right (a side camera); ``pitch_deg``: the ground seen at this pitch (a hill; None: the camera's)."""
     cam = DEFAULT_CAMERA
     v, u = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
     rays = np.linalg.inv(cam.intrinsics()) @ np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
-    level = pitch_matrix(cam.pitch_deg).T @ rays
+    level = pitch_matrix(cam.pitch_deg if pitch_deg is None else pitch_deg).T @ rays
     down = level[1] > 1e-6
     t = np.where(down, cam.height_m / np.where(down, level[1], 1.0), 0.0)
-    x, z = (t * level[0]).reshape(u.shape), (t * level[2]).reshape(u.shape)
+    x, z = (t * level[0]).reshape(u.shape) + camera_x, (t * level[2]).reshape(u.shape)
     ground = down.reshape(u.shape)
     img = np.empty((cam.height, cam.width, 3), np.float64)
     img[:] = (120, 160, 220)
@@ -169,3 +171,15 @@ def test_the_track_is_told_from_the_asphalts_colour() -> None:
     assert detect_track(np.array([147.0, 128.0, 131.0])) == "jungle"  # atul799, the darkest jungle asphalt
     assert detect_track(np.array([148.0, 128.0, 132.0])) == "jungle"
     assert detect_track(np.array([76.0, 129.0, 125.0])) == "mountain"  # AVMktl-2, the lightest mountain
+
+
+def test_the_grounds_pitch_is_read_off_the_side_cameras() -> None:
+    # issue 43: on the jungle's hills the road ahead is not the plane the car stands on; the centre frame
+    # re-projected to each side camera's place matches the real side frames best at the ground's own pitch
+    side = DEFAULT_CAMERA.side_offset_m
+    for pitch in (2.0, 6.2, 12.0):
+        frames = [_render_jungle(-3.0, 5.0, seed, dash_phase=0.7 * seed, camera_x=x, pitch_deg=pitch)
+                  for seed, x in ((1, 0.0), (2, -side), (3, side))]
+        found, correlation = frame_pitch(*frames)
+        assert found == pytest.approx(pitch, abs=1.0) and correlation > 0.6
+    assert np.isnan(frame_pitch(frames[0], None, None)[0])

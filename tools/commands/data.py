@@ -82,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     cv = sub.add_parser("crossval", formatter_class=formatter, help="score each recording with its fold's model",
                         description="each public recording scored by the model trained without its fold: open loop "
-                                    "(every row, centre camera) and, on lake, closed loop (rbc drive-log); prints "
+                                    "(every row, centre camera) and closed loop (rbc drive-log, every track); prints "
                                     "the per-track summary and one row per recording as markdown")
     cv.add_argument("--root", type=Path, default=Path("real"), metavar="DIR",
                     help="where rbc data fetch put the recordings (default %(default)s)")

@@ -7,12 +7,15 @@ over when the car leaves the road, whose edges are found in every recorded frame
 the paper's Eq. 1.
 
 Owns: the real simulator's camera model (its numbers and pinhole maths are :mod:`protocol.camera`'s) and its
-calibration from the side cameras (``camera``, ``calibrate``), the recorded path (``path``), the road's edges
-(``road``), the loop and its drivers (``loop``), the one assembly of a closed loop on a recording that every
-command uses (``run``), and its pictures (``pictures``). May import ``protocol`` (the camera, frame time
-stamps), ``drive_server`` (the serving pipeline, so the model sees exactly what the server would give it),
-``tools.sim.driving.rules`` (the degree of autonomy) and ``models.data.labels`` (numpy only); never torch,
-and never ``tools.realdata`` (which drives recordings through here: ``rbc data crossval``).
+calibration from the side cameras (``camera``, ``calibrate``), the ground's pitch in every frame (``pitch``), the
+recorded path (``path``), the road's edges and each track's profile (``road``, ``road_view``, ``track``), the loop
+and its drivers (``loop``), the one assembly of a closed loop on a recording that every command uses (``run``),
+driving chosen rows only (``rows``), and its pictures (``pictures``, ``road_picture``). May import ``protocol``
+(the camera, frame time stamps), ``drive_server`` (the serving pipeline, so the model sees exactly what the
+server would give it), ``tools.sim.driving.rules`` (the degree of autonomy), ``models.data.labels`` (numpy only)
+and, to draw a training run's held-out rows again, ``models.data.trainingdata`` and
+``models.training.train_config`` (no torch); never torch, and never ``tools.realdata`` (which drives recordings
+through here: ``rbc data crossval``).
 
 Why not MIT's VISTA (``vista`` 2.0.6 on PyPI, the field's data-driven simulator): its sdist declares no
 dependencies but imports pyrender (OpenGL, so EGL or OSMesa on a headless machine) and ffio (an ffmpeg

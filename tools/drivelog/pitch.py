@@ -2,9 +2,10 @@
 
 The ground-plane re-projection (:mod:`tools.drivelog.camera`) and the road finder's view from above
 (:mod:`tools.drivelog.road_view`) take the road ahead to be the plane the car stands on, seen 6.2 deg down. On
-hills it is not: where the road ahead climbs, the camera looks at it less steeply than at flat ground, so a
-ground point appears nearer the horizon and further away, and lateral distances 4-7 m ahead come out 30 %
-too wide at 4 deg (too narrow where the road ahead falls away). The left and right cameras see the same
+hills it is not: where the road ahead climbs, its points stand higher than flat ground's and appear nearer
+the horizon, so flat ground puts them further away and lateral distances 4-7 m ahead come out 30 % too wide
+at 4 deg (too narrow where the road ahead falls away); to the camera such ground is a plane at a larger
+pitch than the car's own (a smaller one where it falls away). The left and right cameras see the same
 ground from 0.95 m to each side, so the plane's pitch is measured in every frame: the centre frame is
 re-projected to each side camera's place for a range of pitches, and the pitch whose views correlate best
 with the real side frames (normalised correlation of the road rows) is that frame's. Over frames a running

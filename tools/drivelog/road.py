@@ -155,7 +155,7 @@ def estimate_road(drive: RecordedDrive, wheelbase_m: float, camera: UnityCamera 
     for session in np.unique(drive.session):
         steps = drive.session_range(int(session))
         sl = slice(steps.start, steps.stop)
-        left, right = _consistent(raw[sl], width)
+        left, right = _consistent(raw[sl], width, chosen.consensus_m)
         out_left[sl] = _fill(_running_median(left, MEDIAN_FRAMES), -width / 2)
         out_right[sl] = _fill(_running_median(right, MEDIAN_FRAMES), width / 2)
         off_road[sl] = _long_runs(bare[sl], OFF_ROAD_FRAMES)
@@ -175,7 +175,7 @@ def _long_runs(flags: np.ndarray, frames: int) -> np.ndarray:
     return out
 
 
-def _consistent(raw: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+def _consistent(raw: np.ndarray, width: float, consensus_m: float = WIDTH_TOLERANCE_M) -> tuple[np.ndarray, np.ndarray]:
     """Per frame the (left, right) edges from what it saw (``raw``; NaN: not seen), checked against the
     road's width and the frames around it.
 
@@ -204,6 +204,6 @@ def _consistent(raw: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = middle - local[i] / 2, middle + local[i] / 2
         # believed if it agrees with the frames around and leaves the recorded car on the road: a lone edge
         # further out than that is not the road's (the bridge's wall, with the deck wider than the road)
-        if abs(middle - consensus) <= WIDTH_TOLERANCE_M and lo < -CAR_HALF_WIDTH_M and hi > CAR_HALF_WIDTH_M:
+        if abs(middle - consensus) <= consensus_m and lo < -CAR_HALF_WIDTH_M and hi > CAR_HALF_WIDTH_M:
             left[i], right[i] = lo, hi
     return left, right

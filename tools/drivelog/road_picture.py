@@ -21,8 +21,9 @@ from tools.drivelog.path import RecordedDrive, curvature
 from tools.drivelog.road import RoadEdges
 from tools.sim.pictures.text import draw_text
 
-#: Distances ahead (m) the edges are drawn over: from just past the bonnet to where they are a pixel apart.
-DRAWN_AHEAD_M = (3.0, 15.0)
+#: Distances ahead (m) the edges are drawn over: from just past the bonnet to a little past the band the finder
+#: measures (further on, a sharp bend leaves the parabola the edges are straightened along).
+DRAWN_AHEAD_M = (3.0, 10.0)
 #: The band the finder looks at (m ahead), shaded: where its edges were measured.
 _EDGE, _BAND = (40, 220, 255), (255, 200, 60)  # BGR: yellow edges, light blue band
 

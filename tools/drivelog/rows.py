@@ -42,7 +42,8 @@ def rows_mask(samples: Sequence[Sample], ranges: Sequence[RowRange]) -> np.ndarr
 
 def held_out_mask(samples: Sequence[Sample], run_dir: Path) -> np.ndarray:
     """Per sample: whether the training run in ``run_dir`` held its row out for validation (its ``config.json``
-    says which logs it read and how it split them; the split is drawn again, no frame decoded)."""
+    says which logs it read and how it split them; the split is drawn again, no frame decoded). A run that read
+    every Nth row held out stretches of them: the rows between two held-out neighbours are held out too."""
     from models.data.trainingdata import split_logs
     from models.training.train_config import TrainConfig
 
@@ -53,8 +54,15 @@ def held_out_mask(samples: Sequence[Sample], run_dir: Path) -> np.ndarray:
         raise ValueError(f"{path}: not a training run's config ({exc})") from None
     config = TrainConfig.from_dict(stored, str(path))
     dataset, _, val = split_logs(config.data, config.seed, config.data_options())
-    held = {(s.log, s.line) for s in (dataset.samples[i] for i in val)}
-    return np.array([(s.log, s.line) in held for s in samples], bool)
+    spans: dict[Path, list[tuple[int, int]]] = {}
+    for run in np.split(val, np.flatnonzero(np.diff(val) != 1) + 1):
+        if not len(run):
+            continue
+        first, last = dataset.samples[run[0]], dataset.samples[run[-1]]
+        for log in {first.log, last.log}:  # a stretch across two logs: each its own part
+            lines = [dataset.samples[i].line for i in run if dataset.samples[i].log == log]
+            spans.setdefault(log, []).append((min(lines), max(lines)))
+    return np.array([any(a <= s.line <= b for a, b in spans.get(s.log, ())) for s in samples], bool)
 
 
 def chosen_rows(drive: RecordedDrive, road: RoadEdges | None, keep: np.ndarray

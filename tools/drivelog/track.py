@@ -34,6 +34,10 @@ class TrackProfile:
     # the ground ahead seen at its own pitch in every frame, measured on the side cameras (tools.drivelog.pitch):
     # the jungle's and the mountain's hills (the lake is flat: its figures stay as calibrated)
     ground_pitch: bool = False
+    # a side seen alone is believed where the road's middle it proposes is within this of what the frames around
+    # propose (m): the lake's 1 m outvotes a sunlit patch; on the jungle one lane's edge is all a frame sees in
+    # two frames of three, and in a hairpin the road's middle moves metres within the 30 frames that vote
+    consensus_m: float = 1.0
 
 
 #: The tracks' profiles. Lake: the finder as calibrated there. Jungle: its dashes are 0.2-0.3 m wide in the
@@ -41,7 +45,8 @@ class TrackProfile:
 #: than the sunlit asphalt and 10 units bluer (b*). Mountain: dark asphalt under shade of its own walls.
 TRACK_PROFILES: dict[str, TrackProfile] = {
     "lake": TrackProfile("lake", (133.0, 125.0, 135.0)),
-    "jungle": TrackProfile("jungle", (156.0, 128.0, 130.0), line_gap_m=0.6, shade=True, ground_pitch=True),
+    "jungle": TrackProfile("jungle", (156.0, 128.0, 130.0), line_gap_m=0.6, shade=True, ground_pitch=True,
+                           consensus_m=2.5),
     "mountain": TrackProfile("mountain", (64.0, 129.0, 129.0), shade=True, ground_pitch=True),
 }
 #: Typical spread (L, a, b) of a recording's asphalt colour straight ahead: the scale on which a recording's

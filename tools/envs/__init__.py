@@ -30,8 +30,10 @@ in [-1, 1]: steering (+ = right, 1 = 25 degrees), and with ``steer_throttle`` th
 
 Reward (:class:`RewardSpec`): metres along the lap, less 2.5 per second with the car's body over its lane's
 edge, less 10 on a take-over. ``terminated``: the referee took over (off the road, a cone, spun out, wrong
-way, stuck; ``info["intervention"]`` says which). ``truncated``: the laps are driven (``info["laps_done"]``),
-the lap's time limit or ``max_episode_steps``.
+way, stuck; ``info["intervention"]`` says which); with ``terminate_on_takeover=False`` the episode goes on from
+where the referee put the car back (the take-over still costs its penalty and is named in ``info``: DAgger's
+learner drives on). ``truncated``: the laps are driven (``info["laps_done"]``), the lap's time limit or
+``max_episode_steps``.
 
 ``info``: ``cte_m`` (from the car's line, + = left), ``heading_error_deg`` (+ = turned left of the lap),
 ``speed_kmh``, ``progress_m``, ``lap_progress`` (laps driven), ``t_s``, ``step``, ``expert_action`` (the

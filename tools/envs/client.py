@@ -119,6 +119,12 @@ class HeadlessSimClient:
         return StepReport(progress_m=self._view.progress - progress0, out_of_lane_s=outside, intervention=cause,
                           laps_done=laps_done, time_out=sim.done and not laps_done and not cause)
 
+    def follow(self) -> None:
+        """Look at the car where it is now (after a take-over: where the referee put it back), not where the
+        last step ended."""
+        sim = self._sim
+        self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
+
     # --- looking ------------------------------------------------------------------------------------
     def render(self) -> dict[str, np.ndarray]:
         """The cameras' frames (RGB uint8, 160x320) at the car's pose, as the renderer draws them."""

@@ -27,7 +27,7 @@ class RewardSpec:
 
     reward = progress_per_m * metres driven along the lap in the step
              - out_of_lane_per_s * seconds of the step with the car's body over its lane's edge
-             - termination (once, on the step a take-over ends the episode)
+             - termination (once, on the step of a take-over, which ends the episode by default)
 
     A step is 1/15 s (``control_hz``), about 0.46 m at the default 25 km/h, so a step fully out of the lane
     costs about a third of what it earns, and a take-over (leaving the road, hitting a cone, spinning out,
@@ -71,6 +71,9 @@ class DriveEnvConfig:
     light_intensity: float = ScenarioConfig.light_intensity
     cones: int = 0
     reverse: bool = False  # drive the lap the other way round
+    # False: a take-over does not end the episode; the referee has put the car back on its line, the step's
+    # observation is the car there and info["intervention"] names the cause (DAgger: the learner drives on)
+    terminate_on_takeover: bool = True
     reward: RewardSpec = field(default_factory=RewardSpec)
 
     def __post_init__(self) -> None:

@@ -2,8 +2,8 @@
 
 The manifest puts each recording in a fold (one driver's recordings share one); a model trained on the
 other folds scores it open loop (every row, centre camera, against the recorded steering and against
-always-0) and, on the lake track, closed loop (``rbc drive-log``). What a new driver's data looks like
-to the recipe, as one table: the README's and the model card's figures come from here.
+always-0) and closed loop (``rbc drive-log``, on every track of :data:`CLOSED_LOOP_TRACKS`). What a new
+driver's data looks like to the recipe, as one table: the README's and the model card's figures come from here.
 """
 
 from __future__ import annotations
@@ -25,9 +25,11 @@ if TYPE_CHECKING:
 
 #: The placeholder of ``--models`` that becomes each recording's fold.
 FOLD_FIELD = "{fold}"
-#: Tracks whose recordings are also driven closed loop (the re-projection assumes flat ground: the jungle
-#: and mountain tracks climb and fall, so their views would be wrong).
-CLOSED_LOOP_TRACKS = ("lake",)
+#: Tracks whose recordings are also driven closed loop: all three. The road is found by the manifest's track's
+#: profile (tools.drivelog.track: the jungle's two lanes and shade, the mountain's dark road), and on the jungle's
+#: and the mountain's hills the ground ahead is seen at the pitch the side cameras measure in every frame
+#: (tools.drivelog.pitch), where over flat ground its views and edges were wrong.
+CLOSED_LOOP_TRACKS = ("lake", "jungle", "mountain")
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,7 @@ def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: 
     (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES, smooth=smooth)
     eta = interventions = per_takeover = off_road = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
-        eta, interventions, per_takeover, off_road = _closed_loop(data, model, rules, smooth)
+        eta, interventions, per_takeover, off_road = _closed_loop(data, model, rules, smooth, rec.track)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
                           round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover,
                           _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth, off_road)
@@ -99,15 +101,16 @@ def _rounded(value: float | None) -> float | None:
     return None if value is None or np.isnan(value) else round(value, 4)
 
 
-def _closed_loop(data: Path, model: Path, rules: LoopRules | None,
-                 smooth: float | None) -> tuple[float, int, float, float]:
-    """eta, take-overs, seconds driven per take-over, and seconds the recorded driver was off the road."""
+def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float | None,
+                 track: str | None = None) -> tuple[float, int, float, float]:
+    """eta, take-overs, seconds driven per take-over, and seconds the recorded driver was off the road; the road
+    found by ``track``'s profile (None: told from the frames)."""
     from protocol.datalog import read_log
     from tools.drivelog.path import recorded_drive
     from tools.drivelog.run import drive_recording
 
     log = recorded_drive(read_log(data)[0])
-    result = drive_recording(log, rules, model, smooth=smooth, snapshots=0).result  # as rbc drive-log does
+    result = drive_recording(log, rules, model, smooth=smooth, snapshots=0, track=track).result  # as rbc drive-log
     return (round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2),
             round(result.off_road_s, 2))
 
@@ -120,7 +123,10 @@ def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_
     ``journal``, a recording already scored under the same key is taken from it and each new score is added
     to it as soon as it is finished (a stopped run resumes there)."""
     jobs = [(rec, root, model_for(pattern, rec), closed_loop, rules, smooth) for rec in recs]
-    keys = [score_key(what, rec.name, model, closed_loop, rules, smooth) for rec, _, model, *_ in jobs]
+    from drive_server.runrecords import code_version
+
+    code = code_version() if journal is not None else ""
+    keys = [score_key(what, rec.name, model, closed_loop, rules, smooth, code) for rec, _, model, *_ in jobs]
     out: list[RecordingScore | None] = [journal.get(k) if journal else None for k in keys]
     todo = [i for i, s in enumerate(out) if s is None]
     finished = len(jobs) - len(todo)
@@ -234,10 +240,13 @@ def model_digest(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
-def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: Any, smooth: float | None) -> str:
-    """Everything a recording's score depends on, as one canonical string."""
+def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: Any, smooth: float | None,
+              code: str = "") -> str:
+    """Everything a recording's score depends on, as one canonical string: with ``code`` (the code version)
+    a run resumed after the measure's code changed scores every recording afresh instead of mixing two."""
     return json.dumps({"what": what, "recording": name, "model": model_digest(model), "closed_loop": closed_loop,
-                       "rules": asdict(rules) if rules is not None else None, "smooth": smooth}, sort_keys=True)
+                       "rules": asdict(rules) if rules is not None else None, "smooth": smooth, "code": code},
+                      sort_keys=True)
 
 
 class ScoreJournal:

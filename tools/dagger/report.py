@@ -1,0 +1,165 @@
+"""DAgger against behavioural cloning at equal expert frames: the table, the curve and the target's verdict.
+
+Reads two finished (or partly finished) ``rbc dagger`` runs, one ``--baseline bc``, from their ``summary.json``
+and writes ``comparison.md`` (one row per budget, both methods side by side), ``comparison.json`` and
+``curve.png`` (eta on the unseen worlds against expert frames: mean and worst world, both methods; the built-in
+tracks beside it).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from drive_server.runrecords import code_version, read_json, write_json, write_text
+from protocol.errors import BadValue
+from tools.dagger.config import TARGET_ETA, DaggerConfig
+from tools.dagger.loop import SUMMARY_JSON
+
+CURVE = "curve.png"
+
+
+def load_rows(folder: Path) -> tuple[str, list[dict[str, Any]], dict[str, Any]]:
+    path = Path(folder) / SUMMARY_JSON
+    if not path.is_file():
+        raise BadValue(f"{folder}: no {SUMMARY_JSON} (not an rbc dagger output folder, or no round finished yet)")
+    summary = read_json(path)
+    return summary["mode"], summary["rounds"], summary
+
+
+def frames_to_target(rows: list[dict[str, Any]]) -> int | None:
+    """The fewest expert frames after which every unseen world was driven at >= 95 % (None: never)."""
+    return next((r["expert_frames"] for r in rows if r.get("worlds_n") and r["worlds_at_target"] == r["worlds_n"]),
+                None)
+
+
+def verdict(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> dict[str, Any]:
+    """Issue #46's target: DAgger drives every unseen world at >= 95 % with at most a third of the expert frames
+    behavioural cloning needs for the same (or, where BC never gets there, a third of the most it was given)."""
+    d, b = frames_to_target(dagger), frames_to_target(bc)
+    most_bc = max((r["expert_frames"] for r in bc), default=0)
+    bound = b if b is not None else most_bc
+    out: dict[str, Any] = {"target_eta": TARGET_ETA, "dagger_frames": d, "bc_frames": b, "bc_most_frames": most_bc,
+                           "bc_reached": b is not None}
+    out["met"] = d is not None and bound > 0 and 3 * d <= bound
+    if d is None:
+        best = max(dagger, key=lambda r: (r.get("worlds_at_target", 0), r.get("worlds_worst", 0)), default=None)
+        out["dagger_best"] = None if best is None else {
+            "expert_frames": best["expert_frames"], "worlds_at_target": best.get("worlds_at_target"),
+            "worlds_n": best.get("worlds_n"), "worst": best.get("worlds_worst")}
+        top = out["dagger_best"]
+        out["text"] = (f"missed: DAgger drove every unseen world at >= {TARGET_ETA:.0f} % at none of its budgets "
+                       f"(best: {top['worlds_at_target']}/{top['worlds_n']} worlds, worst {top['worst']:.1f} %, at "
+                       f"{top['expert_frames']:,} frames)" if top else "missed: no DAgger round")
+    else:
+        ratio = d / bound if bound else float("inf")
+        out["ratio"] = round(ratio, 3)
+        bc_text = f"BC at {b:,}" if b is not None else f"BC never within {most_bc:,}"
+        out["text"] = (f"{'met' if out['met'] else 'missed'}: DAgger at {d:,} expert frames, {bc_text} "
+                       f"({'at most ' if b is None else ''}{ratio:.2f}x the frames; the target is <= 0.33x)")
+    return out
+
+
+def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, Any]:
+    """Write ``out/comparison.md``, ``comparison.json`` and ``curve.png``; return the comparison."""
+    mode_d, dagger, sum_d = load_rows(dagger_dir)
+    mode_b, bc, sum_b = load_rows(bc_dir)
+    if (mode_d, mode_b) != ("dagger", "bc"):
+        raise BadValue(f"compare a dagger run with a bc run: {dagger_dir} is {mode_d}, {bc_dir} is {mode_b}",
+                       "rbc dagger --compare DAGGER_OUT BC_OUT --out REPORT (the BC run made with --baseline bc)")
+    who = ("mode", "beta0", "beta_decay", "budgets")  # what may differ: who drove, and how many frames
+    d_cfg = {k: v for k, v in DaggerConfig.from_dict(sum_d["config"]).to_dict().items() if k not in who}
+    b_cfg = {k: v for k, v in DaggerConfig.from_dict(sum_b["config"]).to_dict().items() if k not in who}
+    if d_cfg != b_cfg:
+        diff = sorted(k for k in d_cfg if d_cfg[k] != b_cfg.get(k))
+        raise BadValue(f"the two runs differ in more than who drove: {', '.join(diff)}",
+                       "run both with the same --recipe, --seed, evaluation worlds and tracks")
+    out.mkdir(parents=True, exist_ok=True)
+    result = {"verdict": verdict(dagger, bc), "dagger": dagger, "bc": bc, "dagger_dir": str(dagger_dir),
+              "bc_dir": str(bc_dir), "config": sum_d["config"], "bc_config": sum_b["config"],
+              "seed": sum_d["seed"], "code_version": code_version()}
+    write_json(out / "comparison.json", result)
+    write_text(out / "comparison.md", comparison_table(dagger, bc) + "\n" + result["verdict"]["text"] + "\n")
+    plot_curve(dagger, bc, out / CURVE)
+    return result
+
+
+def comparison_table(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> str:
+    """One row per budget: each method's worlds mean, worst world, worlds at >= 95 %, take-overs and tracks."""
+    by_frames: dict[int, dict[str, dict[str, Any]]] = {}
+    for name, rows in (("dagger", dagger), ("bc", bc)):
+        for row in rows:
+            by_frames.setdefault(row["expert_frames"], {})[name] = row
+    tracks = [k[:-4] for k in (dagger or bc)[0] if k.endswith("_eta")]
+    head = ["expert frames", "method", "beta", "worlds mean η", "worst world η", "worlds ≥ 95 %",
+            "take-overs (worlds + tracks)"] + [f"{t} η" for t in tracks]
+    perturbations = [k for k in ("orientation", "light_intensity", "light_direction")
+                     if any(k in r for r in dagger + bc)]
+    head += [p.replace("_", " ") for p in perturbations]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for frames in sorted(by_frames):
+        for name in ("bc", "dagger"):
+            row = by_frames[frames].get(name)
+            if row is None:
+                continue
+            cells = [f"{frames:,}", "DAgger" if name == "dagger" else "BC", f"{row['beta']:.3g}"]
+            if "worlds_mean" in row:
+                cells += [f"{row['worlds_mean']:.1f} %", f"{row['worlds_worst']:.1f} %",
+                          f"{row['worlds_at_target']}/{row['worlds_n']}"]
+            else:
+                cells += ["–"] * 3
+            cells.append(str(row["all_takeovers"]))
+            cells += [f"{row[f'{t}_eta']:.1f} %" for t in tracks]
+            cells += [str(row.get(p, "–")) for p in perturbations]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_curve(dagger: list[dict[str, Any]], bc: list[dict[str, Any]], path: Path) -> Path:
+    """eta against expert frames: the unseen worlds' mean and worst world (left), the worlds driven at >= 95 %
+    (middle), lake and mountain (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, middle, right) = plt.subplots(1, 3, figsize=(15, 4.3), dpi=110)
+    styles = {"dagger": ("tab:blue", "DAgger"), "bc": ("tab:orange", "BC")}
+    n = next((r["worlds_n"] for r in dagger + bc if r.get("worlds_n")), 0)
+    for name, rows in (("bc", bc), ("dagger", dagger)):
+        color, label = styles[name]
+        xs = [r["expert_frames"] for r in rows]
+        if rows and "worlds_mean" in rows[0]:
+            left.plot(xs, [r["worlds_mean"] for r in rows], "-o", color=color, label=f"{label}: mean of the worlds")
+            left.plot(xs, [r["worlds_worst"] for r in rows], "--s", color=color, label=f"{label}: worst world")
+            middle.plot(xs, [r["worlds_at_target"] for r in rows], "-o", color=color, label=label)
+        for track, marker, dash in (("lake", "o", "-"), ("mountain", "^", ":")):
+            if rows and f"{track}_eta" in rows[0]:
+                right.plot(xs, [r[f"{track}_eta"] for r in rows], dash + marker, color=color, label=f"{label}: {track}")
+    frames = sorted({r["expert_frames"] for r in dagger + bc})
+    for ax, title in ((left, f"{n} unseen generated worlds (evaluation seeds)"),
+                      (middle, f"unseen worlds driven at >= {TARGET_ETA:.0f} %"), (right, "built-in tracks")):
+        if ax is middle:
+            ax.axhline(n, color="0.4", linewidth=0.8, linestyle="-.", label=f"target: all {n}")
+            ax.set(ylim=(-0.5, n + 0.5), ylabel="worlds")
+            ax.set_yticks(range(0, n + 1, max(1, n // 4)))
+        else:
+            ax.axhline(TARGET_ETA, color="0.4", linewidth=0.8, linestyle="-.", label=f"target {TARGET_ETA:.0f} %")
+            ax.set(ylabel="degree of autonomy η (%)")
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(frames, [f"{f / 1000:g}k" if f >= 1000 else str(f) for f in frames])
+        ax.minorticks_off()
+        ax.set(xlabel="expert-labelled frames")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+    low = min([r.get("worlds_worst", 100) for r in dagger + bc]
+              + [r.get(k, 100) for r in dagger + bc for k in ("lake_eta", "mountain_eta")])
+    for ax in (left, right):
+        ax.set_ylim(max(0.0, low - 5), 101)
+    fig.suptitle("DAgger against behavioural cloning at equal expert frames (rbc dagger)", fontsize=11)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -1,0 +1,182 @@
+"""One round's data: drive ``rbc/Drive-v0`` on training worlds, label every visited frame with the expert.
+
+Each step the expert (the autopilot's pure-pursuit steering, ``info["expert_action"]``) drives with probability
+beta and the learner (the previous round's ONNX model through drive_server's pipeline, :class:`OnnxPolicy`)
+otherwise; either way the frame is recorded with the expert's steering as its label. A take-over does not end
+the episode (``terminate_on_takeover=False``): the referee puts the car back and the learner drives on, so the
+states after its mistakes are labelled too. Episodes start anywhere along a new training world (its seed drawn
+from the training range; the environment refuses evaluation worlds) and last ``episode_steps`` steps.
+
+The folder is a recording as ``rbc collect`` writes one, so ``rbc train`` reads it unchanged:
+``driving_log.csv`` (steering = the expert's label, throttle and brake as applied, speed in mph), ``IMG/`` (the
+frames' JPEG bytes exactly as the wire carries them), ``camera_rig.json``, and beside them ``frames.csv``: for
+every row the episode, world, who drove, the expert's and the learner's steering and the take-over, if any.
+It is written into ``DIR.partial`` and renamed to ``DIR`` when whole, so a killed round leaves no half recording.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import io
+import logging
+import shutil
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drive_server.runrecords import write_json
+from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name
+from protocol.errors import BadValue
+from protocol.facts import CAMERAS
+from protocol.rigfile import write_rig
+from protocol.units import from_kmh
+from tools.dagger.config import STREAM_EPISODES, STREAM_MIX, DaggerConfig
+from tools.sim.collect.dataset import EPOCH
+from tools.sim.worldgen import world_seed_range
+
+log = logging.getLogger(__name__)
+
+FRAMES_CSV = "frames.csv"
+FRAMES_COLUMNS = ("row", "episode", "step", "world_seed", "driver", "expert_steering", "learner_steering",
+                  "cte_m", "speed_kmh", "intervention")
+SUMMARY = "collection.json"
+
+
+@dataclass(frozen=True)
+class Episode:
+    """Where one episode drives: a training world and the seed of its reset (spawn point, spawn noise, bumps)."""
+
+    world_seed: int
+    reset_seed: int
+
+
+@dataclass
+class CollectionStats:
+    frames: int = 0
+    episodes: int = 0
+    expert_steps: int = 0  # steps the expert drove
+    learner_steps: int = 0  # steps the learner drove
+    takeovers: int = 0  # take-overs while collecting (the referee put the car back)
+    abs_disagreement: float = 0.0  # mean |learner - expert| steering over the steps the learner was asked
+    world_seeds: tuple[int, ...] = ()
+
+
+def episodes(config: DaggerConfig, round_: int, count: int) -> list[Episode]:
+    """The first ``count`` episodes of a round: seeded by (seed, round), the same in "dagger" and "bc"."""
+    rng = np.random.default_rng([config.seed, round_, STREAM_EPISODES])
+    train = world_seed_range("train")
+    return [Episode(int(rng.integers(train.start, train.stop)), int(rng.integers(1, 2**31 - 1)))
+            for _ in range(count)]
+
+
+def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | None,
+                  progress: Callable[[int, int], None] | None = None) -> CollectionStats:
+    """Record round ``round_``'s ``config.new_frames(round_)`` expert-labelled frames into ``out``.
+
+    ``learner``: the ONNX model that drives with probability 1 - beta (None only where beta is 1).
+    ``progress(frames, total)`` is called after every episode.
+    """
+    import gymnasium as gym
+
+    from tools.envs import ENV_ID, OnnxPolicy
+
+    beta = config.beta(round_)
+    if learner is None and beta < 1.0:
+        raise BadValue(f"round {round_} mixes in a learner (beta {beta:g}) but none was given")
+    total = config.new_frames(round_)
+    plan = episodes(config, round_, -(-total // config.episode_steps))
+    policy = OnnxPolicy(learner, speed_limit_kmh=config.speed_limit_kmh) if learner is not None else None
+    if policy is not None and policy.camera_rig != config.camera:
+        raise BadValue(f"the learner {learner} was trained on the {policy.camera_rig} camera, the data is "
+                       f"recorded with {config.camera}")
+    mix = np.random.default_rng([config.seed, round_, STREAM_MIX])
+    final = out.resolve()  # the log names each frame where it will be once the folder is renamed into place
+    partial = final.with_name(final.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)  # what a killed collection left: collected again, the same
+    (partial / IMAGE_DIR).mkdir(parents=True)
+    write_rig(partial, config.camera)
+    cameras = CAMERAS[:config.cameras]
+    stats = CollectionStats()
+    disagreements: list[float] = []
+    table = io.StringIO()
+    rows = csv.writer(table, lineterminator="\n")
+    rows.writerow(FRAMES_COLUMNS)
+    start = EPOCH + dt.timedelta(days=round_)
+    clock = 0.0
+    with LogWriter(partial / LOG_NAME) as writer:
+        for number, episode in enumerate(plan):
+            env = gym.make(ENV_ID, world_seed=episode.world_seed, purpose="train", spawn="random",
+                           cameras=config.cameras, camera=config.camera, speed_limit_kmh=config.speed_limit_kmh,
+                           action_delay=config.action_delay, max_episode_steps=config.episode_steps,
+                           terminate_on_takeover=False, disable_env_checker=True)
+            try:
+                obs, info = env.reset(seed=episode.reset_seed)
+                for step in range(config.episode_steps):
+                    if stats.frames >= total:
+                        break
+                    expert = float(info["expert_action"][0])
+                    learned = policy.steering(obs["center"] if config.cameras == 3 else obs, info) if policy else None
+                    by_expert = policy is None or bool(mix.random() < beta)
+                    when = start + dt.timedelta(seconds=round(clock + step / env.unwrapped.config.control_hz, 3))
+                    paths = _write_frames(partial / IMAGE_DIR, cameras, when, obs, info)
+                    action = np.array([expert if by_expert else learned], np.float32)
+                    command = env.unwrapped.command(action)
+                    writer.write([str(final / IMAGE_DIR / p.name) for p in paths], expert, max(0.0, command.throttle),
+                                 max(0.0, -command.throttle), from_kmh(info["speed_kmh"], "mph"))
+                    obs, _, _, truncated, info = env.step(action)
+                    stats.frames += 1
+                    stats.expert_steps += by_expert
+                    stats.learner_steps += not by_expert
+                    stats.takeovers += bool(info["intervention"])
+                    if learned is not None:
+                        disagreements.append(abs(learned - expert))
+                    rows.writerow([stats.frames, number, step, episode.world_seed, "expert" if by_expert else "learner",
+                                   f"{expert:.7g}", "" if learned is None else f"{learned:.7g}",
+                                   f"{info['cte_m']:.4f}", f"{info['speed_kmh']:.3f}", info["intervention"]])
+                    if truncated:
+                        break
+            finally:
+                env.close()
+            clock += config.episode_steps / 15.0 + 10.0
+            stats.episodes += 1
+            stats.world_seeds += (episode.world_seed,)
+            if progress is not None:
+                progress(stats.frames, total)
+            if stats.frames >= total:
+                break
+    if stats.frames != total:
+        raise RuntimeError(f"round {round_}: {stats.frames} frames collected, {total} planned")
+    stats.abs_disagreement = float(np.mean(disagreements)) if disagreements else 0.0
+    (partial / FRAMES_CSV).write_text(table.getvalue(), encoding="utf-8")
+    write_json(partial / SUMMARY, {"round": round_, "beta": beta, "learner": str(learner) if learner else None,
+                                   **asdict(stats)})
+    shutil.rmtree(final, ignore_errors=True)
+    partial.rename(final)
+    return stats
+
+
+def _write_frames(folder: Path, cameras: tuple[str, ...], when: dt.datetime, obs, info) -> list[Path]:
+    """The step's frames as JPEG files: the centre one as the wire carries it (``info["jpeg"]``), side ones
+    encoded from the observation at the simulator's quality."""
+    paths = [folder / frame_name(camera, when) for camera in cameras]
+    if len(cameras) == 1:
+        paths[0].write_bytes(info["jpeg"])
+        return paths
+    from protocol.facts import JPEG_QUALITY
+    from protocol.jpeg import encode_jpeg
+
+    for camera, path in zip(cameras, paths, strict=True):
+        path.write_bytes(info["jpeg"] if camera == "center" else encode_jpeg(obs[camera], JPEG_QUALITY))
+    return paths
+
+
+def read_stats(folder: Path) -> CollectionStats:
+    """The statistics a finished collection wrote beside its frames."""
+    from drive_server.runrecords import read_json
+
+    data = read_json(folder / SUMMARY)
+    return CollectionStats(**{k: (tuple(v) if k == "world_seeds" else v) for k, v in data.items()
+                              if k in CollectionStats.__dataclass_fields__})
