@@ -202,7 +202,8 @@ def test_the_verdict_compares_frames_to_target(tmp_path):
     missed = verdict(dagger[:1], bc)
     assert not missed["met"] and missed["dagger_best"]["worlds_at_target"] == 5 and missed["text"].startswith("missed")
     table = comparison_table(dagger, bc)
-    assert "| 2,000 | DAgger | 1 | 97.0 % | 96.0 % | 20/20 | 1 | 100.0 % | 97.0 % |" in table
+    assert "| 2,000 | BC | 85.0 % | 60.0 % | 10/20 | 11 | 100.0 % | 85.0 % |" in table
+    assert "| 2,000 | DAgger (expert only) | 97.0 % | 96.0 % | 20/20 | 1 | 100.0 % | 97.0 % |" in table
     assert plot_curve(dagger, bc, tmp_path / "curve.png").stat().st_size > 10_000
 
 

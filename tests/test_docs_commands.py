@@ -148,6 +148,12 @@ def small(argv: list[str], ws: dict) -> list[str]:
         argv = _flag(_flag(argv, "--frames", "30"), "--warmup", "5")
     elif cmd == "compare":
         argv = _flag(argv, "--frames", "30")
+    elif cmd == "dagger" and "--compare" not in argv:  # two tiny rounds, one short unseen world, no tracks
+        for flag, value in (("--budgets", "60,120"), ("--episode-steps", "60"), ("--epochs", "1"),
+                            ("--max-steps-per-epoch", "2"), ("--eval-worlds", "1"),
+                            ("--eval-world-config", WORLD_CONFIG)):
+            argv = _flag(argv, flag, value)
+        argv = [*argv, "--tracks", "--no-progress"]
     elif argv[:2] == ["data", "fetch"]:
         argv = _flag(argv, "--base-url", ws["base_url"])
     return argv

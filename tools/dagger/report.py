@@ -75,7 +75,7 @@ def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, Any]:
         raise BadValue(f"the two runs differ in more than who drove: {', '.join(diff)}",
                        "run both with the same --recipe, --seed, evaluation worlds and tracks")
     out.mkdir(parents=True, exist_ok=True)
-    result = {"verdict": verdict(dagger, bc), "dagger": dagger, "bc": bc, "dagger_dir": str(dagger_dir),
+    result = {"verdict": verdict(dagger, bc), "rows": merged_rows(dagger, bc), "dagger_dir": str(dagger_dir),
               "bc_dir": str(bc_dir), "config": sum_d["config"], "bc_config": sum_b["config"],
               "seed": sum_d["seed"], "code_version": code_version()}
     write_json(out / "comparison.json", result)
@@ -84,34 +84,34 @@ def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, Any]:
     return result
 
 
+def merged_rows(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Both methods' rounds by expert frames (BC first at equal frames), each named with its beta."""
+    rows = [{**r, "method": f"DAgger (β {r['beta']:.3g})" if r["beta"] < 1 else "DAgger (expert only)"}
+            for r in dagger] + [{**r, "method": "BC"} for r in bc]
+    for row in rows:
+        row["every_world"] = bool(row.get("worlds_n")) and row.get("worlds_at_target") == row["worlds_n"]
+    return sorted(rows, key=lambda r: (r["expert_frames"], r["mode"] != "bc"))
+
+
+#: The comparison's columns: header, then a format over a merged row (8 columns, the site's widest table).
+COLUMNS = (("expert frames", "{expert_frames:,}"), ("method", "{method}"),
+           ("worlds: mean η", "{worlds_mean:.1f} %"), ("worst world", "{worlds_worst:.1f} %"),
+           ("worlds ≥ 95 %", "{worlds_at_target}/{worlds_n}"), ("take-overs", "{all_takeovers}"),
+           ("lake η", "{lake_eta:.1f} %"), ("mountain η", "{mountain_eta:.1f} %"))
+
+
 def comparison_table(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> str:
-    """One row per budget: each method's worlds mean, worst world, worlds at >= 95 %, take-overs and tracks."""
-    by_frames: dict[int, dict[str, dict[str, Any]]] = {}
-    for name, rows in (("dagger", dagger), ("bc", bc)):
-        for row in rows:
-            by_frames.setdefault(row["expert_frames"], {})[name] = row
-    tracks = [k[:-4] for k in (dagger or bc)[0] if k.endswith("_eta")]
-    head = ["expert frames", "method", "beta", "worlds mean η", "worst world η", "worlds ≥ 95 %",
-            "take-overs (worlds + tracks)"] + [f"{t} η" for t in tracks]
-    perturbations = [k for k in ("orientation", "light_intensity", "light_direction")
-                     if any(k in r for r in dagger + bc)]
-    head += [p.replace("_", " ") for p in perturbations]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for frames in sorted(by_frames):
-        for name in ("bc", "dagger"):
-            row = by_frames[frames].get(name)
-            if row is None:
-                continue
-            cells = [f"{frames:,}", "DAgger" if name == "dagger" else "BC", f"{row['beta']:.3g}"]
-            if "worlds_mean" in row:
-                cells += [f"{row['worlds_mean']:.1f} %", f"{row['worlds_worst']:.1f} %",
-                          f"{row['worlds_at_target']}/{row['worlds_n']}"]
-            else:
-                cells += ["–"] * 3
-            cells.append(str(row["all_takeovers"]))
-            cells += [f"{row[f'{t}_eta']:.1f} %" for t in tracks]
-            cells += [str(row.get(p, "–")) for p in perturbations]
-            lines.append("| " + " | ".join(cells) + " |")
+    """One row per method and budget: the worlds' mean and worst eta, the worlds at >= 95 %, the take-overs on
+    the worlds and tracks together, and each built-in track (a column a run lacks prints as "–")."""
+    lines = ["| " + " | ".join(head for head, _ in COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    for row in merged_rows(dagger, bc):
+        cells = []
+        for _, template in COLUMNS:
+            try:
+                cells.append(template.format(**row))
+            except KeyError:
+                cells.append("–")
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
