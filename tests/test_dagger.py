@@ -223,3 +223,19 @@ def test_the_docs_example_runs(capsys):
     exec(compile(textwrap.dedent(example), "docs/python.md", "exec"), {})
     assert re.fullmatch(r"1500 frames, \d+ m, \d+ take-overs, mean \|learner - expert\| 0\.\d{3}\n",
                         capsys.readouterr().out)
+
+
+def test_the_perturbations_are_rbc_evals_table9_rows(clean, tmp_path):
+    """--perturbations: Table 9's orientation and light rows on lake, rbc eval's range searches, in the record."""
+    from tests.conftest import write_stadium
+    from tools.dagger.scoring import evaluate_model
+
+    config = _config(eval_worlds=0, tracks=(write_stadium(tmp_path, straight=40.0, radius=25.0),), perturbations=True)
+    scores = evaluate_model(loop.model_path(clean, 1), tmp_path / "eval", config, [])
+    assert set(scores["perturbations"]) == {"orientation", "light_intensity", "light_direction"}
+    for found in scores["perturbations"].values():  # a two-step model is taken over on lake: every range is empty
+        assert found["text"] and {"lower", "upper", "unit"} <= set(found)
+    assert scores["all"]["runs"] == 1 and "worlds" not in scores
+    row = loop.round_row({"round": 0, "mode": "dagger", "beta": 1.0, "expert_frames": 60, "eval": scores,
+                          "collection": {"learner_steps": 0, "takeovers": 0}})
+    assert "orientation" in loop.rounds_table([row])

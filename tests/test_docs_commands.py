@@ -148,8 +148,10 @@ def small(argv: list[str], ws: dict) -> list[str]:
         argv = _flag(_flag(argv, "--frames", "30"), "--warmup", "5")
     elif cmd == "compare":
         argv = _flag(argv, "--frames", "30")
-    elif cmd == "dagger" and "--compare" not in argv:  # two tiny rounds, one short unseen world, no tracks
-        for flag, value in (("--budgets", "60,120"), ("--episode-steps", "60"), ("--epochs", "1"),
+    elif cmd == "dagger" and "--compare" not in argv:  # tiny rounds, one short unseen world, no tracks
+        rounds = len(argv[argv.index("--budgets") + 1].split(",")) if "--budgets" in argv else 4
+        argv = _flag(argv, "--budgets", ",".join(str(60 * (r + 1)) for r in range(rounds)))  # the page's rounds
+        for flag, value in (("--episode-steps", "60"), ("--epochs", "1"),
                             ("--max-steps-per-epoch", "2"), ("--eval-worlds", "1"),
                             ("--eval-world-config", WORLD_CONFIG)):
             argv = _flag(argv, flag, value)
