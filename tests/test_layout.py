@@ -119,43 +119,12 @@ def test_no_import_cycles():
     # a package's __init__ importing its own submodules is how re-exports work, not a cycle of jobs
     graph = {n: {d for d in deps if not (d.startswith(n + ".") and MODULES[n].name == "__init__.py")}
              for n, deps in graph.items()}
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    cycles: list[list[str]] = []
-
-    def visit(v: str) -> None:  # Tarjan's strongly connected components
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        for w in graph[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = []
-            while True:
-                w = stack.pop()
-                component.append(w)
-                if w == v:
-                    break
-            if len(component) > 1:
-                cycles.append(sorted(component))
-
-    for v in graph:
-        if v not in index:
-            visit(v)
-    assert cycles == []
+    assert _cycles(graph) == []
 
 
 def _package(module: str) -> str:
     """The package a module belongs to: itself for a package's ``__init__``, else the folder it sits in."""
     return module if MODULES[module].name == "__init__.py" else module.rsplit(".", 1)[0]
-
-
-#: Edges between packages allowed despite the rule (none: every entry needs its why and its fix).
-PENDING_EDGES: set[tuple[str, str]] = set()
 
 
 def _package_graph() -> dict[str, dict[str, list[str]]]:
@@ -166,7 +135,7 @@ def _package_graph() -> dict[str, dict[str, list[str]]]:
         source = _package(name)
         graph.setdefault(source, {})
         for imp in _imports(path):
-            if imp not in MODULES or (name, imp) in PENDING_EDGES:
+            if imp not in MODULES:
                 continue
             target = _package(imp)
             if target != source and not (name == source and target.startswith(source + ".")):

@@ -90,6 +90,18 @@ def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUni
                          [s.left for s in samples], [s.right for s in samples])
 
 
+def running_median(values: np.ndarray, frames: int) -> np.ndarray:
+    """Centred median over ``frames`` frames, NaNs ignored (NaN where a window holds nothing): per-frame
+    measurements over a recording (road edges, the ground's pitch) smoothed without being dragged by outliers."""
+    half = frames // 2
+    out = np.full(len(values), np.nan)
+    for i in range(len(values)):
+        window = values[max(0, i - half):i + half + 1]
+        if np.isfinite(window).any():
+            out[i] = np.nanmedian(window)
+    return out
+
+
 def advance(s: float, e: float, psi: float, v: float, dt: float, k_car: float, k_lane: float
             ) -> tuple[float, float, float]:
     """One step of a bicycle of curvature ``k_car`` in the Frenet frame of a path of curvature ``k_lane``

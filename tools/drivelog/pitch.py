@@ -25,6 +25,7 @@ import numpy as np
 
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, view_homographies
+from tools.drivelog.path import running_median
 
 #: Rows of the frame compared (the road between the horizon and the bonnet, as the calibration's).
 ROAD_ROWS = (78, 134)
@@ -132,16 +133,6 @@ def reprojection_by_slope(frames: Sequence[tuple[Path, Path, Path]], camera: Uni
     return out
 
 
-def _running_median(values: np.ndarray, frames: int) -> np.ndarray:
-    half = frames // 2
-    out = np.full(len(values), np.nan)
-    for i in range(len(values)):
-        window = values[max(0, i - half):i + half + 1]
-        if np.isfinite(window).any():
-            out[i] = np.nanmedian(window)
-    return out
-
-
 def ground_pitch(centre: list[Path], left: list[Path | None] | None, right: list[Path | None] | None,
                  session: np.ndarray, camera: UnityCamera = DEFAULT_CAMERA,
                  on_frame: Callable[[int, int], None] | None = None) -> np.ndarray:
@@ -161,7 +152,7 @@ def ground_pitch(centre: list[Path], left: list[Path | None] | None, right: list
     out = np.full(n, camera.pitch_deg)
     for s in np.unique(session):
         idx = np.flatnonzero(session == s)
-        smooth = _running_median(raw[idx], MEDIAN_FRAMES)
+        smooth = running_median(raw[idx], MEDIAN_FRAMES)
         known = np.flatnonzero(np.isfinite(smooth))
         if len(known):
             out[idx] = np.interp(np.arange(len(idx)), known, smooth[known])

@@ -37,7 +37,7 @@ from models.data.labels import centred_average
 from protocol.camera import CAR_HALF_WIDTH_M
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera
-from tools.drivelog.path import RecordedDrive, curvature
+from tools.drivelog.path import RecordedDrive, curvature, running_median
 from tools.drivelog.pitch import ground_pitch
 from tools.drivelog.road_view import (
     asphalt_ahead,
@@ -103,16 +103,6 @@ class RoadEdges:
                 + (f"; off the road in {off} frames" if off else ""))
 
 
-def _running_median(values: np.ndarray, frames: int) -> np.ndarray:
-    half = frames // 2
-    out = np.full(len(values), np.nan)
-    for i in range(len(values)):
-        window = values[max(0, i - half):i + half + 1]
-        if np.isfinite(window).any():
-            out[i] = np.nanmedian(window)
-    return out
-
-
 def _fill(values: np.ndarray, fallback: float) -> np.ndarray:
     """Gaps filled linearly from their neighbours (ends: the nearest value; nothing at all: ``fallback``)."""
     known = np.flatnonzero(np.isfinite(values))
@@ -156,8 +146,8 @@ def estimate_road(drive: RecordedDrive, wheelbase_m: float, camera: UnityCamera 
         steps = drive.session_range(int(session))
         sl = slice(steps.start, steps.stop)
         left, right = _consistent(raw[sl], width, chosen.consensus_m)
-        out_left[sl] = _fill(_running_median(left, MEDIAN_FRAMES), -width / 2)
-        out_right[sl] = _fill(_running_median(right, MEDIAN_FRAMES), width / 2)
+        out_left[sl] = _fill(running_median(left, MEDIAN_FRAMES), -width / 2)
+        out_right[sl] = _fill(running_median(right, MEDIAN_FRAMES), width / 2)
         off_road[sl] = _long_runs(bare[sl], OFF_ROAD_FRAMES)
     return RoadEdges(out_left, out_right, measured, width, off_road, chosen.name, pitch)
 
@@ -191,7 +181,7 @@ def _consistent(raw: np.ndarray, width: float, consensus_m: float = WIDTH_TOLERA
     half = CONSENSUS_HALF_FRAMES
     span = raw[:, 1] - raw[:, 0]
     kept = np.isfinite(span) & (span >= width - WIDTH_TOLERANCE_M)
-    local = _running_median(np.where(kept, span, np.nan), 2 * half + 1)
+    local = running_median(np.where(kept, span, np.nan), 2 * half + 1)
     local = np.where(np.isfinite(local), local, width)
     proposals = np.stack([raw[:, 0] + local / 2, raw[:, 1] - local / 2], axis=1)
     left, right = np.where(kept, raw[:, 0], np.nan), np.where(kept, raw[:, 1], np.nan)

@@ -255,10 +255,13 @@ class ScoreJournal:
     def __init__(self, path: Path | None) -> None:
         self.path = path
         self.scores: dict[str, RecordingScore] = {}
+        self._torn = False  # the file ends inside a line (a kill mid-write): the next entry starts a new one
         if path is None or not path.exists():
             return
         names = {f.name for f in fields(RecordingScore)}
-        for line in path.read_text(encoding="utf-8").splitlines():
+        text = path.read_text(encoding="utf-8")
+        self._torn = bool(text) and not text.endswith("\n")
+        for line in text.splitlines():
             try:
                 entry = json.loads(line)
                 self.scores[entry["key"]] = RecordingScore(**{k: v for k, v in entry["score"].items() if k in names})
@@ -273,8 +276,8 @@ class ScoreJournal:
         if self.path is None:
             return
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        torn = self.path.exists() and self.path.stat().st_size and not self.path.read_bytes().endswith(b"\n")
         with self.path.open("a", encoding="utf-8") as fh:
-            fh.write(("\n" if torn else "") + json.dumps({"key": key, "score": score.as_dict()}) + "\n")
+            fh.write(("\n" if self._torn else "") + json.dumps({"key": key, "score": score.as_dict()}) + "\n")
             fh.flush()
             os.fsync(fh.fileno())
+        self._torn = False

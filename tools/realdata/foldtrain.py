@@ -13,12 +13,11 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
+from models.networks.runfiles import CONFIG, MODEL
 from tools.realdata.recordings import PublicRecording
 
 #: Where fold F's run lives under the runs folder.
 RUN_NAME = "fold-{fold}"
-MODEL = "model.onnx"
-CONFIG = "config.json"
 
 
 def fold_models(runs: Path) -> str:
