@@ -243,16 +243,18 @@ def test_the_edge_gain_reaches_the_augmentation_and_a_bad_one_is_refused(tmp_pat
             TrainConfig(data=["d"], out=str(tmp_path), **bad)
 
 
-def test_rbc_data_road_public_measures_the_lake_recordings_and_says_what_is_missing(
+def test_rbc_data_road_public_measures_every_track_and_says_what_is_missing(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The jungle and mountain roads are found too, so --public measures the whole list, not only the lake."""
     from tools.cli import main
-    from tools.realdata.recordings import public_recordings, select
+    from tools.realdata.recordings import public_recordings
 
-    lake = [r.name for r in select(public_recordings(), "lake")]
-    shutil.copytree(SAMPLE, tmp_path / lake[0])
+    every = public_recordings()
+    assert {r.track for r in every} == {"lake", "jungle", "mountain"}
+    shutil.copytree(SAMPLE, tmp_path / every[0].name)
     assert main(["data", "road", "--public", str(tmp_path)]) == 2
     err = capsys.readouterr().err
-    assert f"{len(lake) - 1} public lake recordings not under {tmp_path}" in err and "rbc data fetch" in err
-    assert not (tmp_path / lake[0] / "road_edges.csv").exists()  # nothing measured before the check
+    assert f"{len(every) - 1} public recordings not under {tmp_path}" in err and "rbc data fetch" in err
+    assert not (tmp_path / every[0].name / "road_edges.csv").exists()  # nothing measured before the check
     assert main(["data", "road"]) == 2
     assert "--public ROOT" in capsys.readouterr().err

@@ -75,7 +75,8 @@ SUBCOMMANDS: tuple[Subcommand, ...] = (
                "train"),
     Subcommand("train-bench", "tools.commands.train_bench", "augmentation and training throughput; projected paper run",
                "train"),
-    Subcommand("model-card", "tools.commands.model_card", "write the model card of a bundled model from its run"),
+    Subcommand("model-card", "tools.commands.model_card",
+               "write a model's card and the resolved recipe beside it, from its training run"),
 )
 BY_NAME = {c.name: c for c in SUBCOMMANDS}
 

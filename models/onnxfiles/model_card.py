@@ -1,75 +1,329 @@
-"""The model card of a bundled model: its data, configuration, validation MSE and closed-loop result."""
+"""A model's card: what it is, how to use it, how to measure it and how to rebuild it (``rbc model-card``).
+
+Every fact comes from what training recorded (the run's ``config.json``) and from what the model file says about
+itself (its ONNX metadata). A card holds no result figures, which live in ``results/*.json`` and on
+docs/results.md: it says how to measure the model instead, and names the resolved recipe saved beside it.
+"""
 
 from __future__ import annotations
 
 import json
+import os
+import shlex
+import textwrap
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from drive_server.runrecords import read_json
-from models.networks.architectures import ARCHITECTURES as TABLES
-from models.networks.runfiles import CONFIG, HISTORY, read_history
+from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
+from drive_server.smoothing import OFF, SERVING_KEY, serving_alpha
+from models.networks.architectures import ARCHITECTURES
+from protocol.errors import BadValue
+from protocol.facts import FRAME_HEIGHT
 
-_NAMES = {"shallow": "The paper's shallow CNN", "pilotnet": "NVIDIA's PilotNet",
-          "shallow-wide": "The shallow CNN, twice the width and filters"}
-#: Each network's card line; sizes from its layer table (models.networks.architectures), said there once.
-ARCHITECTURES = {n: f"{_NAMES[n]} ({a.params:,} parameters, {a.width}x{a.height} input)" for n, a in TABLES.items()}
-
-
-def _approach(approach: str, resolved: dict) -> str:
-    if approach == "nvidia":
-        return ("NVIDIA's approach (centre camera only, crop, YUV, no zero-steer balancing; random flip, a "
-                "horizontal viewpoint shift and milder brightness)")
-    return (f"the paper's approach (ours: zero-steer balancing lambda = {resolved['deletion_rate']}, "
-            "the augmentations of Table 5)")
-
-
-def _validation(cfg: dict, history: list[dict]) -> str:
-    """The exported epoch's validation MSE and how it was measured (runs before issue 13: random split, last)."""
-    result = cfg.get("result")
-    if result is None:
-        return f"{history[-1]['val_loss']:.5f} (final epoch, random split)"
-    m = result["val_metrics"]
-    return (f"{result['val_mse']:.5f} (epoch {result['exported_epoch']}, export {result['export']}, "
-            f"{result['split']} split; Pearson r {m['r']:.2f}, always-0 MSE {m['zero_mse']:.5f})")
+#: The documentation the cards link to (relative to the card, as the bundled cards do).
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+NETWORKS = {"shallow": "the paper's shallow CNN", "pilotnet": "NVIDIA's PilotNet",
+            "shallow-wide": "the shallow CNN at twice the width, with twice the filters"}
+#: Recipe keys beyond the paper, and the value that leaves each off.
+EXTRAS = {"label_smoothing_frames": 0, "balance_recordings": False, "centre_gain": 0.0, "yaw_aug": 0.0,
+          "edge_gain": 0.0}
+#: The rig of a model of ours whose record names none: it predates the unity rig.
+LEGACY_RIG = "classic"
+#: Width of the card's lines of prose and of its wrapped commands.
+WIDTH = 110
 
 
-def card(run_dir: Path, behavior: str, recipe: str, sim_result: dict, onnx_name: str) -> str:
-    cfg = read_json(run_dir / CONFIG)
-    history = read_history(run_dir / HISTORY)
-    c, r = cfg["config"], cfg["resolved"]
-    train_s = sum(h["seconds"] for h in history)
-    lap = sim_result["laps"][0]
-    sc = sim_result["config"]
-    model_flag = "" if onnx_name == f"{behavior}.onnx" else f" --model models/pretrained/{onnx_name}"
-    lines = [
-        f"# `{onnx_name}`: {behavior} driving behavior",
-        "",
-        f"{ARCHITECTURES.get(c['arch'], c['arch'])} trained with {_approach(c['approach'], r)} on data recorded by "
-        "`rbc collect` in the headless simulator.",
-        "",
-        "| | |", "|---|---|",
-        f"| data | {r['train_samples']} training + {r['val_samples']} validation samples "
-        f"({r['zero_steer_train_samples']} zero-steer training samples before balancing) |",
-        f"| training | {c['arch']}, {r['epochs']} epochs x {r['steps_per_epoch']} steps of {c['batch_size']}, "
-        f"augmentation loops {c['aug_loops']}, Adam {c['learning_rate']}, MSE, seed {c['seed']} |",
-        f"| training time | {train_s / 60:.1f} min on a 2-core CPU |",
-        f"| validation MSE | {_validation(cfg, history)} |",
-        f"| preprocessing | {json.dumps(cfg['contract'])} (in the ONNX metadata) |",
-        f"| closed loop, no variation | eta = {lap['eta']:.1f} % on `{sc['track']}`"
-        + (f" with {sc['cones']} cones (seed {sc['cone_seed']})" if sc["cones"] else "")
-        + f", {lap['n_interventions']} interventions, lap {lap['lap_time_s']:.0f} s at "
-          f"{lap['mean_speed_kmh']:.1f} km/h mean (limit {sc['speed_limit_kmh']:g}), "
-          f"cross-track error RMS {lap['cte_rms_m']:.2f} m |",
-        "",
-        f"Reproduce ({'one command' if len(recipe.strip().splitlines()) == 1 else 'these commands'}; "
-        "deterministic per seed):",
-        "",
-        "```bash",
-        recipe,
-        "```",
-        "",
-        f"Robustness (the paper's eight experiments): `rbc eval --behavior {behavior}{model_flag} "
-        f"--out eval/{Path(onnx_name).stem}`.",
-        "",
-    ]
-    return "\n".join(lines)
+@dataclass(frozen=True)
+class ModelFile:
+    """What a model file says about itself."""
+
+    path: Path  # as the card's commands name it
+    info: dict[str, Any]  # its record (rbc.model); {} if none
+    contract: dict[str, Any]  # its preprocessing (rbc.preprocess); {} if none
+    smooth: float = OFF  # the steering smoothing it asks drive_server for (1: off)
+
+
+@dataclass(frozen=True)
+class CardSource:
+    """What a card is written from."""
+
+    record: dict[str, Any]  # the run's config.json
+    model: ModelFile
+    recipe: Path  # the resolved recipe beside the card, as the commands name it
+    home: str  # rbc sim flags of the behavior's scene, e.g. "--track lake"
+    purpose: str = ""  # the card's one-line purpose; empty: one said from the run
+    data_commands: tuple[str, ...] = ()  # commands that made its data, quoted before rbc train
+    recipe_name: str = ""  # how rbc train --recipe names it where it is bundled; empty: by its path
+
+
+def read_model_file(path: Path) -> ModelFile:
+    """The metadata of the ONNX model at ``path``; BadValue if it is not one."""
+    import onnxruntime as ort
+
+    try:
+        meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
+        found = meta.custom_metadata_map
+        info, contract = (json.loads(found.get(k) or "{}") for k in (METADATA_MODEL_INFO_KEY, METADATA_KEY))
+        smooth = serving_alpha(found.get(SERVING_KEY))
+    except Exception as exc:  # ONNX Runtime's own errors, bad JSON, a bad rbc.serving
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+        raise BadValue(f"{path}: not a model file of ours ({first})") from None
+    return ModelFile(path, info if isinstance(info, dict) else {}, contract if isinstance(contract, dict) else {},
+                     smooth)
+
+
+def card(src: CardSource) -> str:
+    """The card, Markdown: purpose, What it is, How to use it, How well it drives, Known limits, Reproduce."""
+    parts = [_title(src), _what_it_is(src), _how_to_use(src), _how_well(src), _limits(src), _reproduce(src)]
+    return "\n\n".join(parts) + "\n"
+
+
+# --- the sections -------------------------------------------------------------------------------------------------
+
+def _title(src: CardSource) -> str:
+    c = src.record["config"]
+    rig = _rig(src)
+    filmed = f"filmed by the `{rig}` camera rig" if rig else "filmed by several camera rigs"
+    network = NETWORKS.get(c["arch"], c["arch"])
+    purpose = src.purpose or (f"{network[0].upper()}{network[1:]} trained for the {c['behavior']} "
+                              f"[behavior]({_link(src, 'glossary.md', 'behavior')}) on "
+                              f"{_count(len(c['data']), 'recording folder')} {filmed}.")
+    return f"# `{src.model.path.name}`: a {c['behavior']} driving model\n\n{_wrap(purpose)}"
+
+
+def _what_it_is(src: CardSource) -> str:
+    c = src.record["config"]
+    params = src.model.info.get("parameters") or ARCHITECTURES[c["arch"]].params
+    items = [("Network", f"{NETWORKS.get(c['arch'], c['arch'])}, {params:,} parameters."),
+             ("Input", _input(src.model.contract or src.record["contract"])), ("Camera", _camera(src)),
+             ("Training data", _training_data(src.record)), ("Validation", _validation(src.record)),
+             ("Training", _training(src)), ("Its answer", _answer(src))]
+    return "## What it is\n\n" + "\n".join(_wrap(f"- **{label}**: {text}", "  ") for label, text in items)
+
+
+def _how_to_use(src: CardSource) -> str:
+    path = _q(src.model.path)
+    text = ("`rbc sim` drives one lap of the headless simulator in-process (`--track world:SEED`: a generated "
+            "world); `drive_server` serves the model to the Udacity simulator "
+            f"([Drive the Udacity simulator]({_link(src, 'unity.md')})).")
+    return _block("## How to use it", [f"rbc sim --model {path} {src.home}", f"drive_server --model {path}"], text)
+
+
+def _how_well(src: CardSource) -> str:
+    c, path, stem = src.record["config"], _q(src.model.path), src.model.path.stem
+    val = [_shown(v) for v in c.get("val_data", [])]
+    rec = _q(val[0]) if val else "DIR"
+    commands = [f"rbc sim --model {path} {src.home} --json lap.json",
+                f"rbc eval --behavior {c['behavior']} --model {path} --out eval/{stem}",
+                f"rbc eval --behavior {c['behavior']} --model {path} --experiments unseen_worlds --worlds 20 "
+                f"--out eval/{stem}-unseen",
+                f"rbc score --data {rec} --model {path}", f"rbc drive-log --data {rec} --model {path}"]
+    which = (f"`{val[0]}`, a recording it was validated on and never trained on" if val else
+             "DIR, a recording of the Udacity simulator it never trained on (`rbc data fetch --out real` fetches "
+             "the public ones)")
+    head = ("This card holds no figures: these commands measure the model, and the "
+            f"[Results]({_link(src, 'results.md')}) page has the bundled models' figures.")
+    text = ("`rbc sim` drives one lap and reports its degree of autonomy and take-overs; `rbc eval` runs the "
+            "paper's eight experiments on the behavior's track, and with `--experiments unseen_worlds` laps of "
+            f"generated roads it never saw; `rbc score` (open loop) and `rbc drive-log` (closed loop) use {which}. "
+            f"[Evaluate a model]({_link(src, 'evaluate.md')}) says what each answers.")
+    return _block("## How well it drives", commands, text, head)
+
+
+def _limits(src: CardSource) -> str:
+    c = src.record["config"]
+    items = ["It knows only the roads, light and camera of its training data; anywhere else, measure it first "
+             "([How well it drives](#how-well-it-drives))."]
+    if _split_kind(src.record) == "random":
+        link = _link(src, "glossary.md", "held-out")
+        items.append("Its validation frames were drawn at random from the recordings it trained on, neighbours of "
+                     f"training frames: its validation error is optimistic ([held-out]({link})).")
+    if src.model.info.get("mirror_average"):
+        items.append("The mirror average drives the middle of the road: it does not keep to one lane.")
+    if c.get("max_steps_per_epoch"):
+        items.append(f"Its epochs were cut to {c['max_steps_per_epoch']} steps (`max_steps_per_epoch`): a quick "
+                     "run, not the full schedule.")
+    return "## Known limits\n\n" + "\n".join(_wrap(f"- {item}", "  ") for item in items)
+
+
+def _reproduce(src: CardSource) -> str:
+    c = src.record["config"]
+    head = (f"Its settings are its recipe, `{src.recipe.as_posix()}` beside this card: every key, resolved from the "
+            "run's record. These commands rebuild it, deterministic per seed:")
+    text = "" if src.data_commands else ("It needs the data folders it was trained and validated on: `rbc collect` "
+                                         "records headless ones, `rbc data fetch` the public real recordings.")
+    commands = [*src.data_commands, _train_command(src, c), *_file_command(src, c)]
+    return _block("## Reproduce", commands, text, head)
+
+
+# --- the facts ----------------------------------------------------------------------------------------------------
+
+def _input(contract: dict[str, Any]) -> str:
+    top, bottom = contract["crop_top"], contract["crop_bottom"]
+    crop = f"the whole {FRAME_HEIGHT}-row picture" if (top, bottom) == (0, FRAME_HEIGHT) else f"rows {top}-{bottom}"
+    low, high = contract["offset"], round(255 * contract["scale"] + contract["offset"], 4)
+    text = (f"one camera frame, {crop} resized to {contract['width']}x{contract['height']}, "
+            f"{contract['color'].upper()}, scaled to {low:g}..{high:g}")
+    if contract.get("decode_reduce", 0) > 1:
+        text += f"; the JPEG is decoded at 1/{contract['decode_reduce']} size"
+    if contract.get("blank_columns"):
+        text += f"; the outer {contract['blank_columns']} columns on each side repeat the next one inward"
+    return text + (". The settings travel in the ONNX file's metadata (`rbc.preprocess`), so `drive_server` "
+                   "prepares frames the same way.")
+
+
+def _camera(src: CardSource) -> str:
+    rig = _rig(src)
+    if not rig:
+        return ("frames of several [camera rigs](" + _link(src, "glossary.md", "camera-rig") + "); the headless "
+                "simulator films it with its default rig.")
+    return (f"the `{rig}` [camera rig]({_link(src, 'glossary.md', 'camera-rig')}). The model's record names it, so "
+            "`rbc sim`, `rbc eval` and `rbc demo` film it with that rig.")
+
+
+def _training_data(record: dict[str, Any]) -> str:
+    c, r, rows = record["config"], record["resolved"], record.get("rows", {})
+    text = _folders(record, c["data"])
+    if rows.get("stride", 1) > 1:
+        text += f"; 1 row in {rows['stride']} used"
+    if c.get("min_speed", 0) > 0:
+        text += f"; rows slower than {c['min_speed']:g} {c.get('min_speed_unit', 'mph')} dropped"
+    zero = r.get("zero_steer_train_samples")
+    return text + f": {r['train_samples']:,} training samples" + (
+        f" ({zero:,} of them steering 0, before balancing)." if zero is not None else ".")
+
+
+def _validation(record: dict[str, Any]) -> str:
+    c, r = record["config"], record["resolved"]
+    if c.get("val_data"):
+        text = f"the recordings {_folders(record, c['val_data'])}: {r['val_samples']:,} samples, never trained on."
+    else:
+        kind = _split_kind(record)
+        how = {"blocks": f"in stretches of {c.get('block_frames')} frames (their neighbours dropped from training)",
+               "random": "at random (the paper's split)", "recordings": "as whole recordings"}.get(kind, kind)
+        text = f"{r['val_samples']:,} samples of the same data, held out {how}."
+    result = record.get("result", {})
+    if c.get("export") == "best":
+        return text + (f" They chose the exported epoch, the one with the lowest validation MSE (epoch "
+                       f"{result.get('exported_epoch', '?')} of {r['epochs']}).")
+    return text + " The last epoch is exported, so they chose nothing."
+
+
+def _training(src: CardSource) -> str:
+    c, r = src.record["config"], src.record["resolved"]
+    link = _link(src, "glossary.md", "approach")
+    if c["approach"] == "nvidia":
+        text = f"NVIDIA's [approach]({link}) (centre camera only, crop, YUV, no zero-steer balancing)"
+    else:
+        scale = ", brightness changed relative to the frame's own" if c.get("brightness_mode") == "scale" else ""
+        text = (f"the paper's [approach]({link}) (zero-steer balancing with lambda = {r['deletion_rate']:g}, the "
+                f"paper's augmentations{scale})")
+    text += (f", {_count(r['epochs'], 'epoch')} of {r['steps_per_epoch']:,} steps of {c['batch_size']} samples "
+             f"({c['aug_loops']} augmentation loops), {r.get('optimizer', 'Adam')} at learning rate "
+             f"{c['learning_rate']:g}, {r.get('loss', 'MSE')} loss, seed {c['seed']}.")
+    extras = [f"`{k} = {json.dumps(c[k])}`" for k, off in EXTRAS.items() if c.get(k, off) != off]
+    return text + (f" Beyond the paper: {', '.join(extras)} (the recipe says what each does)." if extras else "")
+
+
+def _answer(src: CardSource) -> str:
+    info, c, smooth = src.model.info, src.record["config"], src.model.smooth
+    mirror, scale = bool(info.get("mirror_average")), float(info.get("output_scale", 1.0))
+    if not mirror and scale == 1.0 and smooth == OFF:
+        return "the network's steering, as trained."
+    link = _link(src, "glossary.md", "mirror-average-output-scale-smoothing")
+    text = (f"the file answers the [mirror average]({link}) of the network, (f(x) - f(mirrored x)) / 2" if mirror
+            else f"the file answers the network's steering ([output scale, smoothing]({link}))")
+    text += f", times {scale:g}." if scale != 1.0 else "."
+    if smooth < OFF:
+        text += f" `drive_server` smooths its steering with {smooth:g}."
+    text += " The network's weights are the trained ones"
+    return text + ("; `rbc mirror` made the file." if mirror and not c.get("mirror_average") else ".")
+
+
+def _train_command(src: CardSource, c: dict[str, Any]) -> str:
+    words = ["rbc", "train", "--recipe", src.recipe_name or src.recipe.as_posix()]
+    words += [w for d in c["data"] for w in ("--data", _shown(d))]
+    words += [w for d in c.get("val_data", []) for w in ("--val-data", _shown(d))]
+    return _command([*words, "--out", c["out"]])
+
+
+def _file_command(src: CardSource, c: dict[str, Any]) -> list[str]:
+    """How the run's model.onnx becomes the card's file: nothing, a copy, or ``rbc mirror``."""
+    made = Path(c["out"]) / "model.onnx"
+    if os.path.normpath(made) == os.path.normpath(src.model.path):
+        return []
+    words = ["cp", made.as_posix(), src.model.path.as_posix()]
+    if src.model.info.get("mirror_average") and not c.get("mirror_average"):
+        words = ["rbc", "mirror", made.as_posix(), "--out", src.model.path.as_posix()]
+        if src.model.smooth != c.get("serve_smoothing", OFF):
+            words += ["--serve-smooth", f"{src.model.smooth:g}"]
+        scale = float(src.model.info.get("output_scale", 1.0)) / float(c.get("output_scale", 1.0))
+        words += ["--output-scale", f"{scale:g}"] if scale != 1.0 else []
+    return [_command(words)]
+
+
+# --- wording ------------------------------------------------------------------------------------------------------
+
+def _rig(src: CardSource) -> str:
+    """The rig the model learnt from ('' for several)."""
+    return src.model.info.get("camera_rig", LEGACY_RIG)
+
+
+def _split_kind(record: dict[str, Any]) -> str:
+    split = record["resolved"].get("split")
+    return split["kind"] if isinstance(split, dict) else record["config"].get("split", "random")
+
+
+def _folders(record: dict[str, Any], folders: list[str]) -> str:
+    """``folders`` with their rows, from the run's per-log report (one log per folder, training's then
+    validation's, in order)."""
+    c, logs = record["config"], record.get("logs", [])
+    names = [*c["data"], *c.get("val_data", [])]
+    rows = {n: log["rows"] for n, log in zip(names, logs, strict=False)} if len(logs) == len(names) else {}
+    return ", ".join(f"`{_shown(f)}`" + (f" ({rows[f]:,} rows)" if f in rows else "") for f in folders)
+
+
+def _link(src: CardSource, page: str, anchor: str = "") -> str:
+    """A docs page (``#anchor``) as a link relative to the card's folder."""
+    rel = Path(os.path.relpath(DOCS / page, src.recipe.parent.resolve())).as_posix()
+    return rel + (f"#{anchor}" if anchor else "")
+
+
+def _block(heading: str, commands: list[str], text: str, head: str = "") -> str:
+    parts = [heading, *([_wrap(head)] if head else []), "```bash\n" + "\n".join(commands) + "\n```"]
+    return "\n\n".join([*parts, *([_wrap(text)] if text else [])])
+
+
+def _command(words: list[str]) -> str:
+    """A shell command, quoted, wrapped onto continuation lines between a flag and the one before."""
+    groups: list[str] = []
+    for word in map(shlex.quote, words):
+        if groups and not word.startswith("-"):
+            groups[-1] += f" {word}"
+        else:
+            groups.append(word)
+    lines = [groups[0]]
+    for group in groups[1:]:
+        if len(lines[-1]) + len(group) + 3 > WIDTH:
+            lines.append("   ")
+        lines[-1] += f" {group}"
+    return " \\\n".join(lines)
+
+
+def _wrap(text: str, indent: str = "") -> str:
+    return textwrap.fill(text, WIDTH, subsequent_indent=indent, break_long_words=False, break_on_hyphens=False)
+
+
+def _shown(path: str) -> str:
+    """A folder the run recorded (absolute), relative to the working directory where it lies below it."""
+    p, here = Path(path), Path.cwd()
+    return p.relative_to(here).as_posix() if p.is_absolute() and p.is_relative_to(here) else p.as_posix()
+
+
+def _q(path: str | Path) -> str:
+    return shlex.quote(Path(path).as_posix())
+
+
+def _count(n: int, word: str) -> str:
+    return f"{'one' if n == 1 else n} {word}{'' if n == 1 else 's'}"

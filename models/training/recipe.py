@@ -3,7 +3,8 @@
 A recipe's keys are :class:`TrainConfig` fields, and TrainConfig stays the one place of their defaults: this
 module only says which section each key lives in (:data:`SECTIONS`), reads and checks a file (anything wrong is
 one line naming the file and the key), finds the bundled recipes by name, and writes a config back as a recipe
-(``rbc train --print``, the run's record). Where the data is and how the machine runs it stay on the command line.
+(``rbc train --print``, the run's record, the recipe beside a model card). Where the data is and how the machine
+runs it stay on the command line.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.contract import DECODE_REDUCTIONS
+from drive_server.runrecords import write_text
 from models.data.behavior import Approach, Arch
 from models.data.split import SplitKind
 from models.training.train_config import BRIGHTNESS_MODES, EXPORTS, REMOVED, RENAMED, TrainConfig
@@ -172,14 +174,41 @@ def recipe_toml(config: TrainConfig, source: str | None = None) -> str:
     """``config`` as a recipe file: every key with what it is for (``rbc train --print``); read back, it gives
     the same run."""
     named = f"{source} ({find_recipe(source)})" if source else "none (the defaults)"
-    lines = [f"# rbc train recipe: {named}, resolved: every key, defaults included.",
-             "# Read back with rbc train --recipe FILE; --data, --val-data, --out and --threads stay on the command "
-             "line."]
-    for section, values in recipe_sections(config).items():
+    header = [f"rbc train recipe: {named}, resolved: every key, defaults included."]
+    return sections_toml(recipe_sections(config), header)
+
+
+def sections_toml(sections: dict[str, dict[str, Any]], header: list[str]) -> str:
+    """A recipe file of resolved ``sections``: ``header`` as comments, then every key with what it is for."""
+    lines = [f"# {line}" for line in header]
+    lines.append("# Read back with rbc train --recipe FILE; --data, --val-data, --out and --threads stay on the "
+                 "command line.")
+    for section, values in sections.items():
         lines += ["", f"[{section}]"]
         for key, value in values.items():
             lines += [f"# {SECTIONS[section][key]}", f"{key} = {_toml_value(value)}"]
     return "\n".join(lines) + "\n"
+
+
+def run_recipe(record: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """A run's recipe, resolved, from its ``config.json`` record (one written before records held it: from its
+    config)."""
+    if "recipe" in record:
+        return record["recipe"]
+    return recipe_sections(TrainConfig.from_dict(record["config"], "the run's config.json"))
+
+
+def save_run_recipe(record: dict[str, Any], path: Path, header: list[str]) -> bool:
+    """Write the run's resolved recipe to ``path`` (True); a recipe already there that gives the same run is kept
+    as it is, comments and all (False); one that gives another run is an error, never overwritten."""
+    sections = run_recipe(record)
+    if path.exists():
+        if recipe_sections(load_recipe(str(path))) != sections:
+            raise BadValue(f"{path}: a recipe that gives another run than this one is already there",
+                           "move it away, or write the card elsewhere (--out)")
+        return False
+    write_text(path, sections_toml(sections, header))
+    return True
 
 
 def _belongs(key: str, section: str | None = None) -> str:

@@ -68,8 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                       "centre_gain read)")
     road.add_argument("dirs", type=Path, nargs="*", metavar="DIR", help="recording folders (driving_log.csv + IMG/)")
     road.add_argument("--public", type=Path, metavar="ROOT",
-                      help="also every lake recording of the public list under ROOT (where rbc data fetch put them): "
-                           "the lake road has an edge line on each side; jungle and mountain roads are not measured")
+                      help="also every recording of the public list under ROOT (where rbc data fetch put them), "
+                           "each road found by its track's profile")
     road.add_argument("--speed-unit", choices=("mph", "kmh"), default="mph",
                       help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
 
@@ -210,11 +210,11 @@ def _road(args: argparse.Namespace) -> int:
     from tools.drivelog.path import recorded_drive
     from tools.drivelog.run import car_and_road
     from tools.errors import CommandError
-    from tools.realdata.recordings import public_recordings, require_fetched, select
+    from tools.realdata.recordings import public_recordings, require_fetched
 
     dirs = list(args.dirs)
     if args.public:
-        dirs += require_fetched(select(public_recordings(), "lake"), args.public, "public lake recordings")
+        dirs += require_fetched(public_recordings(), args.public, "public recordings")
     if not dirs:
         raise CommandError("no recording to measure", "name recording folders, or --public ROOT for the public ones")
     for folder in dirs:
