@@ -198,11 +198,12 @@ def _compare(real, spec: AugmentSpec, seed: int = 3) -> tuple[float, float]:
     ({"pan": 1.0}, 5.5), ({"tilt": 1.0}, 5.5),  # interpolation at 64x64 instead of 320x160
     ({"pan": 1.0, "tilt": 1.0, "flip": 1.0, "shadow": 1.0, "brightness": 1.0}, 6.5),
     ({"yaw": 1.0}, 5.5), ({"yaw": 1.0, "flip": 1.0, "shadow": 1.0, "perspective": 1.0}, 6.5),  # a turned camera
+    ({"offset": 1.0}, 2.5), ({"offset": 1.0, "yaw": 1.0, "flip": 1.0, "shadow": 1.0, "tilt": 1.0}, 7.0),  # moved
 ])
 def test_fast_path_agrees_with_literal_reference(real, override: dict, bound: float) -> None:
     diff, base = _compare(real, AugmentSpec(**{**NONE, **override}))
     assert diff < bound, (override, diff)
-    if "pan" in override or "tilt" in override or "yaw" in override:
+    if {"pan", "tilt", "yaw", "offset"} & set(override):
         assert diff < 0.5 * base  # far closer than a wrong geometry (no transform at all) would be
 
 

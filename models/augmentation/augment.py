@@ -4,7 +4,9 @@ Order (footnote 4: it matters): perspective shift, shadows, brightness, flip, pa
 with its own probability (Table 5). The random parameters of a whole batch are drawn at once
 (``draw_params``) so the literal full-resolution reference here (``augment_reference``) and the fast
 batched path (``models.augmentation.fastaug``) can be fed the very same draws and compared. ``shift`` is not in the
-paper: it is the horizontal viewpoint shift of the "nvidia" approach (off for the paper's behaviors).
+paper: it is the horizontal viewpoint shift of the "nvidia" approach (off for the paper's behaviors). Two more are
+not in the paper: the car turned (``yaw``) and the car moved sideways (``offset``: DAVE-2's "shifts", the ground-plane
+re-projection of the closed loop's view synthesis, :func:`protocol.camera.view_homographies`).
 """
 
 from __future__ import annotations
@@ -15,10 +17,13 @@ import cv2
 import numpy as np
 
 from models.augmentation import geometry
-from protocol.camera import PITCH_DEG, SIDE_OFFSET_M, VFOV_DEG
+from protocol.camera import HEIGHT_M, PITCH_DEG, SIDE_OFFSET_M, VFOV_DEG
 from protocol.facts import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, MAX_STEERING_DEG
 
 CENTER, LEFT, RIGHT = 0, 1, 2
+#: Metres ahead at which a label aims back at the driver's line: Eq. 4/5's recovery distance (gamma = 0.95 m / 10 m)
+#: and the moved camera's lookahead.
+LOOKAHEAD_M = 10.0
 
 
 @dataclass(frozen=True)
@@ -32,7 +37,7 @@ class AugmentSpec:
     pan: float = 0.1
     tilt: float = 0.05
     shift: float = 0.0  # not in the paper (nvidia approach)
-    gamma: float = SIDE_OFFSET_M / 10.0  # inter-camera distance / recovery distance (Eq. 4/5)
+    gamma: float = SIDE_OFFSET_M / LOOKAHEAD_M  # inter-camera distance / recovery distance (Eq. 4/5)
     shadow_count: int = 4
     shadow_darkness: float = 0.65
     shadow_x: tuple[int, int] = (0, FRAME_WIDTH)
@@ -49,6 +54,14 @@ class AugmentSpec:
     yaw: float = 0.0
     yaw_range_deg: float = 6.0
     yaw_gain: float = 1.0
+    # not in the paper: the car moved x ~ U(-range, range) metres to the side (+ right; DAVE-2's "shifts"), what
+    # its camera would then see (the closed loop's ground-plane re-projection, protocol.camera.view_homographies:
+    # exact on the road, the scenery above the horizon left as it is, the bonnet kept) and a label aiming back at
+    # the driver's line offset_lookahead_m ahead: atan(tan(theta) - x / lookahead), the side cameras' Eq. 4/5 at
+    # x = +-0.95 m. Centre-camera samples only (a side frame already is a moved one)
+    offset: float = 0.0
+    offset_range_m: float = 2.0
+    offset_lookahead_m: float = LOOKAHEAD_M
     # not in the paper: a pull towards the road's middle where a camera stands more than edge_margin_m off it,
     # edge_gain steering per metre beyond the margin, each camera at its own offset (the side cameras
     # side_camera_m to each side); drivers each hold a line of their own within about +-2 m of the middle,
@@ -58,6 +71,7 @@ class AugmentSpec:
     side_camera_m: float = SIDE_OFFSET_M
     camera_vfov_deg: float = VFOV_DEG  # the real simulator's camera (protocol.camera)
     camera_pitch_deg: float = PITCH_DEG
+    camera_height_m: float = HEIGHT_M
 
     @property
     def uses_side_cameras(self) -> bool:
@@ -83,6 +97,8 @@ class AugParams:
     shift_px: np.ndarray  # float64
     yaw: np.ndarray | None = None  # bool; None: no sample turned (a spec without the yaw augmentation)
     yaw_deg: np.ndarray | None = None  # float64, + turned right
+    offset: np.ndarray | None = None  # bool; None: no sample moved (a spec without the offset augmentation)
+    offset_m: np.ndarray | None = None  # float64, + moved right
 
     def __len__(self) -> int:
         return len(self.camera)
@@ -90,12 +106,17 @@ class AugParams:
     @property
     def geometric(self) -> np.ndarray:
         """Samples that need a warp beyond a mirror."""
-        return self.pan | self.tilt | self.shift | self.turned
+        return self.pan | self.tilt | self.shift | self.turned | self.moved
 
     @property
     def turned(self) -> np.ndarray:
         """Samples seen from a turned camera (a projective warp)."""
         return np.zeros(len(self.camera), bool) if self.yaw is None else self.yaw
+
+    @property
+    def moved(self) -> np.ndarray:
+        """Samples seen from a camera moved sideways (a piecewise projective warp: road and scenery apart)."""
+        return np.zeros(len(self.camera), bool) if self.offset is None else self.offset
 
 
 def correction_angles(theta_rad: np.ndarray | float, gamma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -122,14 +143,29 @@ def perspective_label(steering: np.ndarray | float, camera: np.ndarray | int, ga
     return np.clip(np.degrees(out) / MAX_STEERING_DEG, -1.0, 1.0)
 
 
-def edge_pull(middles: np.ndarray, camera: np.ndarray, spec: AugmentSpec) -> np.ndarray:
+def offset_label(steering: np.ndarray | float, offset_m: np.ndarray | float, lookahead_m: float) -> np.ndarray:
+    """Steering label of the centre camera moved ``offset_m`` to the side (+ right; normalised, clamped to -1..1).
+
+    It aims back at the point of the driver's line ``lookahead_m`` ahead: atan(tan(theta) - x / lookahead), so a
+    camera moved right steers left; at x = +-0.95 m and 10 m it is the side cameras' Eq. 4/5 (``perspective_label``).
+    """
+    theta = np.radians(np.asarray(steering, dtype=np.float64) * MAX_STEERING_DEG)
+    out = np.arctan(np.tan(theta) - np.asarray(offset_m, np.float64) / lookahead_m)
+    return np.clip(np.degrees(out) / MAX_STEERING_DEG, -1.0, 1.0)
+
+
+def edge_pull(middles: np.ndarray, camera: np.ndarray, spec: AugmentSpec,
+              offset_m: np.ndarray | None = None) -> np.ndarray:
     """Steering towards the road's middle for cameras beyond ``spec.edge_margin_m`` from it (+ right).
 
     ``middles`` is where the middle lies from the centre camera (m, + right; NaN: unknown, no pull); from
-    the left camera it lies ``side_camera_m`` further right, from the right one as much further left.
+    the left camera it lies ``side_camera_m`` further right, from the right one as much further left, from a
+    camera moved ``offset_m`` to the right (the offset augmentation; None: none) that much further left.
     """
     side = np.where(camera == LEFT, spec.side_camera_m, np.where(camera == RIGHT, -spec.side_camera_m, 0.0))
     middle = np.asarray(middles, np.float64) + side
+    if offset_m is not None:
+        middle = middle - offset_m
     pull = spec.edge_gain * np.sign(middle) * np.maximum(0.0, np.abs(middle) - spec.edge_margin_m)
     return np.nan_to_num(pull, nan=0.0)  # NaN: a recording without a road file
 
@@ -138,8 +174,9 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
                 middles: np.ndarray | None = None) -> AugParams:
     """Draw every augmentation decision of a batch (Table 5 probabilities), in the paper's order.
 
-    All arrays are drawn whether used or not, so a batch consumes the generator identically.
-    ``middles`` (m, + right, per sample: the road's middle from the centre camera) feeds the edge pull.
+    All arrays are drawn whether used or not, so a batch consumes the generator identically; the turn and the
+    move (not in the paper) are drawn last and only when used, so runs without them draw as before. ``middles``
+    (m, + right, per sample: the road's middle from the centre camera) feeds the edge pull.
     """
     n = len(steering)
     steering = np.asarray(steering, dtype=np.float64)
@@ -147,9 +184,6 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
     sides = np.asarray(has_sides, dtype=bool)
     camera = np.where(sides & (u < spec.perspective / 2), LEFT,
                       np.where(sides & (u < spec.perspective), RIGHT, CENTER)).astype(np.int8)
-    label = perspective_label(steering, camera, spec.gamma)
-    if spec.edge_gain > 0 and middles is not None:  # before the flip, which mirrors the road too
-        label = np.clip(label + edge_pull(middles, camera, spec), -1.0, 1.0)
 
     shadow = rng.random(n) < spec.shadow
     xs = rng.integers(spec.shadow_x[0], spec.shadow_x[1], size=(n, spec.shadow_count, 4), endpoint=True)
@@ -160,7 +194,6 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
     beta = np.where(brightness, rng.uniform(-spec.brightness_range, spec.brightness_range, n), 0.0)
 
     flip = (rng.random(n) < spec.flip) & (camera == CENTER)
-    label = np.where(flip, -label, label) + 0.0  # no -0.0 labels
 
     pan = rng.random(n) < spec.pan
     pan_xy = rng.uniform(-spec.pan_range, spec.pan_range, (n, 2)) * np.array([FRAME_WIDTH, FRAME_HEIGHT])
@@ -170,19 +203,32 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
 
     shift = rng.random(n) < spec.shift
     shift_px = rng.uniform(-spec.shift_range_px, spec.shift_range_px, n)
-    label = np.clip(np.where(shift, label + shift_px * spec.shift_steering_per_px, label), -1.0, 1.0)
 
-    yaw = yaw_deg = None
+    yaw = yaw_deg = offset = offset_m = None
     if spec.yaw > 0:  # drawn last and only when used, so runs without it consume the generator as before
         yaw = rng.random(n) < spec.yaw
         yaw_deg = np.where(yaw, rng.uniform(-spec.yaw_range_deg, spec.yaw_range_deg, n), 0.0)
+    if spec.offset > 0:  # likewise, after the turn; centre-camera samples only (a side frame is a moved one)
+        offset = (rng.random(n) < spec.offset) & (camera == CENTER)
+        offset_m = np.where(offset, rng.uniform(-spec.offset_range_m, spec.offset_range_m, n), 0.0)
+
+    # the labels, in the order the views are made: camera (moved), edge pull, flip, shift, turn
+    label = perspective_label(steering, camera, spec.gamma)
+    if offset is not None:
+        label = np.where(offset, offset_label(label, offset_m, spec.offset_lookahead_m), label)
+    if spec.edge_gain > 0 and middles is not None:  # before the flip, which mirrors the road too
+        label = np.clip(label + edge_pull(middles, camera, spec, offset_m), -1.0, 1.0)
+    label = np.where(flip, -label, label) + 0.0  # no -0.0 labels
+    label = np.clip(np.where(shift, label + shift_px * spec.shift_steering_per_px, label), -1.0, 1.0)
+    if yaw is not None:
         back = -spec.yaw_gain * yaw_deg / MAX_STEERING_DEG  # the turn is drawn before the flip mirrors it
         label = np.clip(label + np.where(flip, -back, back), -1.0, 1.0) + 0.0
 
     return AugParams(camera=camera, steering=label.astype(np.float32), shadow=shadow, shadow_xy=shadow_xy,
                      brightness=brightness, beta=beta.astype(np.float32), flip=flip, pan=pan,
                      pan_xy=np.where(pan[:, None], pan_xy, 0.0), tilt=tilt, tilt_deg=np.where(tilt, tilt_deg, 0.0),
-                     shift=shift, shift_px=np.where(shift, shift_px, 0.0), yaw=yaw, yaw_deg=yaw_deg)
+                     shift=shift, shift_px=np.where(shift, shift_px, 0.0), yaw=yaw, yaw_deg=yaw_deg, offset=offset,
+                     offset_m=offset_m)
 
 
 # ---- the literal reference, one full-resolution RGB frame at a time (paper section 3.1.4) ----
@@ -238,6 +284,17 @@ def shift(rgb: np.ndarray, tx: float) -> np.ndarray:
     return cv2.warpAffine(rgb, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
+def move(rgb: np.ndarray, lateral_m: float, spec: AugmentSpec) -> np.ndarray:
+    """The view of the camera moved ``lateral_m`` to the right: the closed loop's ground-plane re-projection (exact
+    on the road, the scenery above the horizon as recorded, the bonnet kept; edge pixels repeated, as ``turn``)."""
+    h, w = rgb.shape[:2]
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    src_x, src_y = geometry.offset_sources(w, h, xs.ravel(), ys.ravel(), np.array([lateral_m]), spec.camera_vfov_deg,
+                                           spec.camera_pitch_deg, spec.camera_height_m)
+    return cv2.remap(rgb, src_x.reshape(h, w).astype(np.float32), src_y.reshape(h, w).astype(np.float32),
+                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
 def turn(rgb: np.ndarray, degrees: float, spec: AugmentSpec) -> np.ndarray:
     """The view of the camera turned ``degrees`` to the right (pure rotation; edge pixels repeated)."""
     h, w = rgb.shape[:2]
@@ -259,6 +316,8 @@ def augment_reference(frames: dict[str, np.ndarray], params: AugParams, i: int,
         img = shadows(img, params.shadow_xy[i], spec.shadow_darkness)
     if params.brightness[i]:
         img = brightness(img, float(params.beta[i]), spec.brightness_mode)
+    if params.moved[i]:  # moved first, then turned: the view of the camera moved, then turned (one homography)
+        img = move(img, float(params.offset_m[i]), spec)
     if params.turned[i]:
         img = turn(img, float(params.yaw_deg[i]), spec)
     if params.flip[i]:

@@ -12,6 +12,10 @@ sample never touches a 320x160 image. Why that is equivalent to the literal full
   interpolation only: the reference interpolates at full resolution and then box-filters, the warp
   interpolates the box-filtered frame, slightly softer (on the 15 % of samples that pan or tilt:
   ~4/255 mean absolute difference on real frames, against 10-14/255 for not transforming at all).
+* The camera moved sideways (``offset``, not in the paper) is no single homography: the road moves through the
+  ground plane's, the scenery above the horizon stays (``geometry.offset_sources``). Its samples are warped with
+  ``cv2.remap`` through a per-pixel map (the sample's turn, flip, pan, shift and tilt composed point by point with
+  it), and their shadows are drawn before the warp, on the cached frame, as the reference does.
 * Shadows are applied after the warp: darkening commutes with moving pixels, so their quadrilaterals
   are mapped through the same affine map and drawn anti-aliased at network resolution (the coverage
   stands in for the box filter's partial darkening along their edges), as ``p - round(p * 0.35 * cover)``
@@ -110,11 +114,18 @@ class FastAugmenter:
         to_full = np.where(params.flip[shadowed, None, None], geometry.flip_pullback(FRAME_WIDTH) @ self._to_full,
                            self._to_full)
         warped = np.flatnonzero(geometric)
+        moved = params.moved
+        if moved.any():  # their shadows are drawn before their warp (below), not after
+            shadowed, to_full = shadowed[~moved[shadowed]], to_full[~moved[shadowed]]
         if len(warped):
             pulls = self.chain(params, warped) @ self._to_full
             maps = geometry.translate(-0.5, -0.5) @ self._from_full @ pulls @ geometry.translate(0.5, 0.5)
             turned = params.turned
+            if moved.any():
+                self._moved(out, idx, params, warped, pulls)
             for k, i in enumerate(warped):
+                if moved[i]:
+                    continue
                 warp = cv2.warpPerspective if turned[i] else cv2.warpAffine
                 out[i] = warp(frames[slots[i], idx[i]], maps[k] if turned[i] else maps[k, :2], self.size,
                               flags=self.interpolation | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
@@ -128,6 +139,30 @@ class FastAugmenter:
         self._brightness(out, params)
         self.lap("brightness", t)
         return out
+
+    def _moved(self, out: np.ndarray, idx: np.ndarray, params: AugParams, warped: np.ndarray,
+               pulls: np.ndarray) -> None:
+        """Warp the samples seen from a moved camera: shadows drawn on the cached frame, then one ``cv2.remap``
+        through the per-pixel map (``pulls``: the chain's, network corner -> full-res corner, per warped sample)."""
+        which = np.flatnonzero(params.moved)
+        slots = self._slot[params.camera[which]]
+        src = self.cache.frames[slots, idx[which]]  # a copy
+        dark = np.flatnonzero(params.shadow[which])
+        if len(dark):
+            forward = np.broadcast_to(self._from_full, (len(dark), 3, 3))
+            self._shadows(src, dark, params.shadow_xy[which[dark]], forward, np.zeros(len(dark), bool))
+        w, h = self.size
+        gx, gy = np.meshgrid(np.arange(w, dtype=np.float64) + 0.5, np.arange(h, dtype=np.float64) + 0.5)
+        grid = np.stack([gx.ravel(), gy.ravel(), np.ones(w * h)])
+        q = pulls[np.searchsorted(warped, which)] @ grid  # full-res corner coordinates of the moved view
+        sx, sy = geometry.offset_sources(FRAME_WIDTH, FRAME_HEIGHT, q[:, 0] / q[:, 2] - 0.5, q[:, 1] / q[:, 2] - 0.5,
+                                         params.offset_m[which], self.spec.camera_vfov_deg,
+                                         self.spec.camera_pitch_deg, self.spec.camera_height_m)
+        f = self._from_full  # affine: full-res corner -> network corner, then network index
+        nx = (f[0, 0] * (sx + 0.5) + f[0, 2] - 0.5).astype(np.float32).reshape(-1, h, w)
+        ny = (f[1, 1] * (sy + 0.5) + f[1, 2] - 0.5).astype(np.float32).reshape(-1, h, w)
+        for k, i in enumerate(which):
+            out[i] = cv2.remap(src[k], nx[k], ny[k], self.interpolation, borderMode=cv2.BORDER_REPLICATE)
 
     def _shadows(self, out: np.ndarray, which: np.ndarray, quads: np.ndarray, forward: np.ndarray,
                  projective: np.ndarray) -> None:

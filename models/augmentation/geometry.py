@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-from protocol.camera import intrinsics, pitch_matrix
+from protocol.camera import BONNET_ROW, horizon_row, intrinsics, pitch_matrix, reproject, view_homographies
+from protocol.facts import FRAME_HEIGHT
 
 Matrix = np.ndarray  # (3, 3) float64
 
@@ -182,3 +183,23 @@ def yaw_pullbacks(width: int, height: int, yaw_rad: np.ndarray, vfov_deg: float,
     # index coordinates (pixel centres at integers) -> corner coordinates: +0.5
     rotate = k @ pitch @ yaw @ pitch.T @ np.linalg.inv(k)
     return translate(0.5, 0.5) @ rotate @ translate(-0.5, -0.5)
+
+
+def offset_sources(width: int, height: int, xs: np.ndarray, ys: np.ndarray, lateral_m: np.ndarray, vfov_deg: float,
+                   pitch_deg: float, height_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where in the recorded frame (index coordinates) the pixels ``(xs, ys)`` (``(n,)`` or ``(k, n)``) of the view
+    from the camera moved ``lateral_m[k]`` (+ right) sideways sample, ``(k, n)`` each.
+
+    The closed loop's view synthesis (:func:`protocol.camera.view_homographies` and ``reproject``): the road
+    through the exact ground-plane homography, the scenery above the horizon as recorded (far away: a sideways
+    move does not shift it), the bonnet's rows kept (it travels with the camera). Not one homography: the
+    sample's other maps are composed with it point by point (``models.augmentation.fastaug``).
+    """
+    homs = [view_homographies(width, height, float(x), 0.0, vfov_deg=vfov_deg, pitch_deg=pitch_deg, height_m=height_m)
+            for x in np.atleast_1d(lateral_m)]
+    ground = np.stack([g for g, _ in homs])
+    far = np.stack([f for _, f in homs])
+    xs, ys = np.asarray(xs, np.float64), np.asarray(ys, np.float64)
+    if xs.ndim == 1:
+        xs, ys = xs[None], ys[None]
+    return reproject(xs, ys, ground, far, horizon_row(height, vfov_deg, pitch_deg), BONNET_ROW * height / FRAME_HEIGHT)

@@ -52,6 +52,11 @@ SECTIONS: dict[str, dict[str, str]] = {
                    "heading feedback a closed loop needs). 0: off",
         "yaw_range": "largest turn of yaw_aug, degrees",
         "yaw_gain": "how much of a turn yaw_aug's label steers back at once (1: aim along the road again)",
+        "offset_aug": "not in the paper: share of centre-camera samples seen from the car moved sideways (DAVE-2's "
+                      "shifts; the road re-projected through the ground plane), labelled to aim back. 0: off",
+        "offset_range": "largest sideways move of offset_aug, metres (drawn uniformly in +-range)",
+        "offset_lookahead": "metres ahead on the driver's line that offset_aug's label aims at (10: the side "
+                            "cameras' Eq. 4/5)",
         "edge_gain": "not in the paper: steering per metre that a camera stands beyond edge_margin from the road's "
                      "middle, towards it (from road files; a recording without one is not pulled). 0: off",
         "edge_margin": "metres from the road's middle within which edge_gain pulls nothing",

@@ -10,7 +10,7 @@ import numpy as np
 
 from drive_server.contract import ContractError, PreprocessContract
 from models.augmentation import geometry
-from models.augmentation.augment import AugmentSpec
+from models.augmentation.augment import LOOKAHEAD_M, AugmentSpec
 from models.data.behavior import (
     AUGMENTATION_LOOPS,
     BATCH_SIZE,
@@ -103,6 +103,11 @@ class TrainConfig:
     yaw_aug: float = 0.0
     yaw_range: float = 6.0
     yaw_gain: float = 1.0
+    # not in the paper: the share of (centre-camera) samples seen from the car moved up to offset_range metres to the
+    # side (DAVE-2's shifts), labelled to aim back at the driver's line offset_lookahead metres ahead (0: off)
+    offset_aug: float = 0.0
+    offset_range: float = 2.0
+    offset_lookahead: float = LOOKAHEAD_M
     # not in the paper: export (f(x) - f(mirror x)) / 2 (models.networks.nets.MirrorAveraged); training is unchanged
     mirror_average: bool = False
     # not in the paper: the exported model's steering times this (models.networks.nets.OutputScaled; 1: as trained);
@@ -129,6 +134,12 @@ class TrainConfig:
             raise BadValue(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
         if not 0.0 <= self.yaw_gain <= 5.0:
             raise BadValue(f"yaw gain must be 0..5, got {self.yaw_gain}")
+        if not 0.0 <= self.offset_aug <= 1.0:
+            raise BadValue(f"offset augmentation share must be 0..1, got {self.offset_aug}")
+        if not 0.0 < self.offset_range <= 4.0:
+            raise BadValue(f"offset range must be above 0 and at most 4 m, got {self.offset_range}")
+        if not 1.0 <= self.offset_lookahead <= 100.0:
+            raise BadValue(f"offset lookahead must be 1..100 m, got {self.offset_lookahead}")
         if self.mirror_average and keeps_lane(self.behavior):
             raise BadValue(f"mirror_average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
                            f"left-right asymmetric task (trained without flips); the average would steer it to the "
@@ -198,6 +209,9 @@ class TrainConfig:
         if self.yaw_aug > 0:
             augment = replace(augment, yaw=self.yaw_aug, yaw_range_deg=self.yaw_range, yaw_gain=self.yaw_gain)
             contract = replace(contract, blank_columns=turned_edge_columns(augment, contract))
+        if self.offset_aug > 0:
+            augment = replace(augment, offset=self.offset_aug, offset_range_m=self.offset_range,
+                              offset_lookahead_m=self.offset_lookahead)
         if self.edge_gain > 0:
             augment = replace(augment, edge_gain=self.edge_gain, edge_margin_m=self.edge_margin,
                               side_camera_m=SIDE_CAMERA_OFFSET_M)

@@ -44,6 +44,8 @@ def _describe(params, i: int) -> str:
         parts.append("shadow")
     if params.brightness[i]:
         parts.append(f"bright{params.beta[i]:+.2g}")
+    if params.moved[i]:
+        parts.append(f"moved{params.offset_m[i]:+.2f}m")
     if params.turned[i]:
         parts.append(f"turn{params.yaw_deg[i]:+.1f}°")
     if params.flip[i]:

@@ -3,7 +3,8 @@
 Moving the camera sideways by ``e`` and turning it by ``psi`` changes what it sees of the ground plane
 by a homography, ``H = K R_old (I + C n^T / h) R_new^T K^-1`` (``C``: the new camera centre in the old
 one's level frame, ``n``: the ground normal, ``h``: the camera height), which is exact for everything on
-the road; above the horizon the scenery is far away and only the turn matters (``C`` -> 0). The car's
+the road; above the horizon the scenery is far away and only the turn matters (``C`` -> 0). That maths is
+:mod:`protocol.camera`'s (``view_homographies``, ``reproject``), shared with the moved-camera augmentation. The car's
 bonnet moves with the camera, so its rows are kept as recorded. This is the view synthesis of NVIDIA's
 DAVE-2 evaluation; :mod:`tools.drivelog.calibrate` measures the camera's numbers (:mod:`protocol.camera`)
 on real frames.
@@ -17,7 +18,7 @@ import cv2
 import numpy as np
 
 from protocol import camera as rig
-from protocol.camera import pitch_matrix, yaw_matrix
+from protocol.camera import pitch_matrix
 from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
@@ -69,16 +70,11 @@ def view_homographies(camera: UnityCamera, lateral_m: float, yaw_rad: float,
     """(ground, far) homographies from a pixel of the new view to the recorded frame.
 
     The new camera stands ``lateral_m`` to the right and ``forward_m`` ahead of the recorded one, turned
-    ``yaw_rad`` to the right; ``ground`` maps the road, ``far`` (rotation only) what lies above the horizon.
+    ``yaw_rad`` to the right; ``ground`` maps the road, ``far`` (rotation only) what lies above the horizon
+    (the maths is :func:`protocol.camera.view_homographies`, shared with the moved-camera augmentation).
     """
-    k = camera.intrinsics()
-    k_inv = np.linalg.inv(k)
-    r_old = pitch_matrix(camera.pitch_deg)
-    r_new = r_old @ yaw_matrix(yaw_rad).T
-    centre = np.array([lateral_m, 0.0, forward_m]) / camera.height_m
-    ground = k @ r_old @ (np.eye(3) + np.outer(centre, [0.0, 1.0, 0.0])) @ r_new.T @ k_inv
-    far = k @ r_old @ r_new.T @ k_inv
-    return ground, far
+    return rig.view_homographies(camera.width, camera.height, lateral_m, yaw_rad, forward_m, vfov_deg=camera.vfov_deg,
+                                 pitch_deg=camera.pitch_deg, height_m=camera.height_m)
 
 
 class ViewSynthesizer:
@@ -88,9 +84,7 @@ class ViewSynthesizer:
         self.camera = camera
         h, w = camera.height, camera.width
         xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-        self._pixels = np.stack([xs.ravel(), ys.ravel(), np.ones(h * w)])
-        self._rows = ys
-        self._below = ys > camera.horizon_row + 1.0
+        self._xs, self._ys = xs.ravel(), ys.ravel()
         self._bonnet = int(camera.bonnet_row)
 
     def view(self, frame: np.ndarray, lateral_m: float, yaw_rad: float, forward_m: float = 0.0,
@@ -104,16 +98,12 @@ class ViewSynthesizer:
         h, w = self.camera.height, self.camera.width
         if frame.shape[:2] != (h, w):
             raise BadValue(f"expected a {w}x{h} frame, got {frame.shape[1]}x{frame.shape[0]}")
-        camera, below = self.camera, self._below
+        camera = self.camera
         if pitch_deg is not None and pitch_deg != camera.pitch_deg:
             camera = replace(camera, pitch_deg=pitch_deg)
-            below = self._rows > camera.horizon_row + 1.0
         ground, far = view_homographies(camera, lateral_m, yaw_rad, forward_m)
-        maps = []
-        for hom in (ground, far):
-            p = hom @ self._pixels
-            maps.append((p[:2] / p[2]).reshape(2, h, w))
-        xy = np.where(below[None], maps[0], maps[1]).astype(np.float32)
-        out = cv2.remap(frame, xy[0], xy[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        map_x, map_y = rig.reproject(self._xs, self._ys, ground, far, camera.horizon_row)
+        out = cv2.remap(frame, map_x.reshape(h, w).astype(np.float32), map_y.reshape(h, w).astype(np.float32),
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         out[self._bonnet:] = (frame if bonnet is None else bonnet)[self._bonnet:]  # it travels with the camera
         return out
