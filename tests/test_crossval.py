@@ -46,6 +46,9 @@ def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
     lake, jungle = summarise(scores)
     assert (lake.recordings, lake.mean_r, lake.beats_zero, lake.mean_eta) == (2, 0.4, 1, 30.0)
     assert (lake.mean_r_to_intent, lake.mean_intent_r) == (0.5, 0.7)
+    # issue 43's targets are per recording: the worst, how many reach 95 %, and the take-overs beside the peer's
+    assert (lake.worst_eta, lake.at_least_95, lake.takeovers) == (20.0, 0, 4)
+    assert (jungle.worst_eta, jungle.at_least_95, jungle.takeovers) == (None, None, None)
     assert jungle.mean_eta is None and jungle.beats_zero == 1 and jungle.mean_intent_r is None
     text = format_tables(scores, peer=scores[:1])
     assert "| lake | 2 | 0.70 | 0.40 | 0.50 | 1 of 2 | 30.0 | 10.0 | 0.50 | 0.60 | 1 of 1 | 20.0 | 8.0 |" in text

@@ -72,6 +72,13 @@ class TrackSummary:
     mean_seconds_per_takeover: float | None
     mean_r_to_intent: float | None = None
     mean_intent_r: float | None = None
+    worst_eta: float | None = None  # the targets are per recording: every one at TARGET_ETA or more
+    at_least_95: int | None = None
+    takeovers: int | None = None
+
+
+#: The closed loop's target per recording, degree of autonomy in %.
+TARGET_ETA = 95.0
 
 
 def model_for(pattern: str, rec: PublicRecording) -> Path:
@@ -166,7 +173,10 @@ def summarise(scores: Sequence[RecordingScore]) -> list[TrackSummary]:
             track, len(mine), round(float(np.mean([s.pearson_r for s in mine])), 3), sum(s.beats_zero for s in mine),
             round(float(np.mean([s.eta for s in driven])), 2) if driven else None,
             round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None,
-            _mean_of([s.r_to_intent for s in mine]), _mean_of([s.intent_r for s in mine])))
+            _mean_of([s.r_to_intent for s in mine]), _mean_of([s.intent_r for s in mine]),
+            min(s.eta for s in driven) if driven else None,
+            sum(s.eta >= TARGET_ETA for s in driven) if driven else None,
+            sum(s.interventions or 0 for s in driven) if driven else None))
     return out
 
 
