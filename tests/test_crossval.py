@@ -121,6 +121,25 @@ def test_a_retrained_model_at_the_same_path_is_scored_again(tmp_path: Path) -> N
     assert same != crossval.score_key("folds", "one", MODEL, True, None, None, code="git abd")  # the measure changed
 
 
+def test_the_journal_keeps_across_changes_outside_the_measuring_code(tmp_path: Path) -> None:
+    """A commit to the docs or the training code must not void a cross-validation spread over sittings; a change
+    to the closed loop, the server's pipeline or the frame format must."""
+    from tools.realdata import crossval
+
+    for folder in (*crossval.MEASURE_CODE, "docs", "models"):
+        (tmp_path / folder).mkdir(parents=True, exist_ok=True)
+        (tmp_path / folder / "a.py").write_text("x = 1\n")
+    version = crossval.measure_version(tmp_path)
+    (tmp_path / "models" / "a.py").write_text("x = 2\n")
+    (tmp_path / "docs" / "b.md").write_text("new page\n")
+    assert crossval.measure_version(tmp_path) == version
+    for folder in crossval.MEASURE_CODE:
+        (tmp_path / folder / "a.py").write_text(f"x = '{folder}'\n")
+        assert crossval.measure_version(tmp_path) != version
+        version = crossval.measure_version(tmp_path)
+    assert crossval.measure_version() == crossval.measure_version()  # the checkout's own, stable
+
+
 def test_the_command_writes_its_figures_and_resumes_to_the_same_json(tmp_path: Path) -> None:
     root = tmp_path / "real"
     root.mkdir()

@@ -346,6 +346,7 @@ def test_reproduce_the_bundled_unity_model(workspace, capsys):
     assert sorted(p.name for p in (ws / "real").iterdir()) == sorted(name for name, *_ in PUBLIC)
     assert (ws / "real" / "0xR4Y" / "road_edges.csv").is_file()
     assert all((ws / "runs" / f"cv-{fold}" / "model.onnx").is_file() for fold in "ABCD")
+    assert all((ws / "runs" / "cv" / f"fold-{fold}" / "model.onnx").is_file() for fold in "ABCD")  # the one command
     record = json.loads((ws / "crossval.json").read_text())
     assert {r["name"] for r in record["folds"]["recordings"]} == {name for name, *_ in PUBLIC}
     assert {r["name"] for r in record["peer"]["recordings"]} == {name for name, *_ in PUBLIC}

@@ -113,8 +113,8 @@ def models_markdown() -> str:
 
     from drive_server.models_dir import bundled_models
 
-    lines = ["| model | network | parameters | behavior | approach | camera rig | training samples | answer |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| model | network (parameters) | behavior, approach | camera rig | training samples | answer |",
+             "|---|---|---|---|---|---|"]
     for path in bundled_models():
         meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
         record = json.loads(meta.custom_metadata_map.get("rbc.model", "{}"))
@@ -128,7 +128,7 @@ def models_markdown() -> str:
             answer.append(f"smoothed {serving['smooth']}")
         params = f"{int(record['parameters']):,}" if record.get("parameters") else "–"
         samples = f"{int(record['train_samples']):,}" if record.get("train_samples") else "–"
-        lines.append(f"| `{path.name}` | {record.get('arch', '–')} | {params} | {record.get('behavior', '–')} | "
+        lines.append(f"| `{path.name}` | {record.get('arch', '–')} ({params}) | {record.get('behavior', '–')}, "
                      f"{record.get('approach', '–')} | {record.get('camera_rig') or 'classic'} | {samples} | "
                      f"{', '.join(answer) or 'as trained'} |")
     return "\n".join(lines) + "\n"

@@ -130,9 +130,7 @@ def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_
     ``journal``, a recording already scored under the same key is taken from it and each new score is added
     to it as soon as it is finished (a stopped run resumes there)."""
     jobs = [(rec, root, model_for(pattern, rec), closed_loop, rules, smooth) for rec in recs]
-    from drive_server.runrecords import code_version
-
-    code = code_version() if journal is not None else ""
+    code = measure_version() if journal is not None else ""
     keys = [score_key(what, rec.name, model, closed_loop, rules, smooth, code) for rec, _, model, *_ in jobs]
     out: list[RecordingScore | None] = [journal.get(k) if journal else None for k in keys]
     todo = [i for i, s in enumerate(out) if s is None]
@@ -248,6 +246,24 @@ def journal_for(json_path: Path) -> Path:
 def model_digest(path: Path) -> str:
     """The model file's content, so the same path holding a retrained model is not taken for the old one."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+#: The code a recording's score depends on (the model's own content is in the key besides): the frame format
+#: and preprocessing, the server's pipeline, the closed loop, and this scoring. A change elsewhere (docs,
+#: training, the simulator) leaves a journal valid, so a cross-validation spread over sittings survives commits.
+MEASURE_CODE = ("protocol", "drive_server", "tools/drivelog", "tools/realdata")
+REPO = Path(__file__).resolve().parents[2]
+
+
+def measure_version(root: Path = REPO) -> str:
+    """A digest of the measuring code's Python sources (:data:`MEASURE_CODE`, under ``root``)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for folder in MEASURE_CODE:
+        for path in sorted((root / folder).rglob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return f"measure {digest.hexdigest()[:16]}"
 
 
 def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: Any, smooth: float | None,
