@@ -99,7 +99,34 @@ def lost_run(folder: Path) -> dict:
             "journal_exists": (folder / "runs.jsonl").exists()}
 
 
-CASES = {"killed_worker": killed_worker, "lost_run": lost_run}
+def submit_after_cancel(folder: Path) -> dict:
+    """A range search's next step submitted while Ctrl-C closes the runner: cancelled at once, never queued."""
+    from concurrent.futures import TimeoutError as FutureTimeout
+
+    from tools.evaluate.cluster import RayRunner, RunLostError
+
+    def slow(spec: DriverSpec, task: Task) -> dict:
+        time.sleep(30)
+        return {}
+
+    start_ray()
+    runner = RayRunner(DriverSpec(model="unused.onnx"), 2, folder / "runs.jsonl", task_fn=slow)
+    in_flight = runner.submit(Task("position", "simplistic", 0.5, 1, {"seed": 1}))
+    runner.close(cancel=True)
+    late = runner.submit(Task("position", "simplistic", 1.0, 1, {"seed": 1}))
+    outcome = {}
+    for name, future in (("in_flight", in_flight), ("late", late)):
+        try:
+            future.result(timeout=5)
+            outcome[name] = "result"
+        except RunLostError:
+            outcome[name] = "cancelled"
+        except FutureTimeout:
+            outcome[name] = "still waiting"
+    return outcome
+
+
+CASES = {"killed_worker": killed_worker, "lost_run": lost_run, "submit_after_cancel": submit_after_cancel}
 
 if __name__ == "__main__":
     facts = CASES[sys.argv[1]](Path(sys.argv[2]))

@@ -48,6 +48,11 @@ def test_a_run_that_fails_every_attempt_is_reported_not_dropped(tmp_path):
     assert facts["records"] == 0 and not facts["journal_exists"]
 
 
+def test_a_run_submitted_after_ctrl_c_is_cancelled_not_left_waiting(tmp_path):
+    """The race behind a hang at exit: a range search's next step landed after close(cancel=True)."""
+    assert ray_case("submit_after_cancel", tmp_path) == {"in_flight": "cancelled", "late": "cancelled"}
+
+
 @pytest.fixture(scope="module")
 def track(tmp_path_factory) -> str:
     return write_stadium(tmp_path_factory.mktemp("track"), straight=40.0, radius=20.0)

@@ -69,8 +69,15 @@ class RayRunner(Runner):
         return outer
 
     def _attempt(self, task: Task, outer: Future, attempt: int) -> None:
-        ref = self._remote.remote(self.spec, task)
+        # Checked and registered under the lock that close() takes to cancel: a range search that submits
+        # its next step while Ctrl-C closes the runner gets a cancelled run, never a task on a Ray that is
+        # shut down (its future would never resolve, and the search thread would hold the exit forever).
         with self._lock:
+            if self._closing.is_set():
+                outer.set_exception(RunLostError(f"run {task.experiment} value={task.value} seed={task.seed} "
+                                                 "cancelled"))
+                return
+            ref = self._remote.remote(self.spec, task)
             self._pending[ref] = outer
         ref.future().add_done_callback(lambda f: self._settle(task, outer, attempt, ref, f))
 
@@ -111,8 +118,8 @@ class RayRunner(Runner):
     def close(self, cancel: bool = False) -> None:
         ray = self._pool
         if cancel:
-            self._closing.set()
             with self._lock:
+                self._closing.set()
                 pending, self._pending = self._pending, {}
             for ref, outer in pending.items():
                 ray.cancel(ref, force=True)
