@@ -5,8 +5,10 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tools.realdata.crossval import RecordingScore, format_tables, model_for, score_recording, summarise
@@ -50,6 +52,11 @@ def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
     assert (lake.worst_eta, lake.at_least_95, lake.takeovers) == (20.0, 0, 4)
     assert (jungle.worst_eta, jungle.at_least_95, jungle.takeovers) == (None, None, None)
     assert jungle.mean_eta is None and jungle.beats_zero == 1 and jungle.mean_intent_r is None
+    # the closed loop's figures arrive as numpy numbers: the summary's counts are still JSON numbers, not the
+    # strings json.dumps(default=str) made of numpy integers ("at_least_95": "22")
+    numpy_scores = [replace(s, eta=np.float64(s.eta)) if s.eta is not None else s for s in scores]
+    summary = json.loads(json.dumps([t.__dict__ for t in summarise(numpy_scores)], default=str))
+    assert summary[0]["at_least_95"] == 0 and summary[0]["takeovers"] == 4 and summary[0]["worst_eta"] == 20.0
     text = format_tables(scores, peer=scores[:1])
     assert "| lake | 2 | 0.70 | 0.40 | 0.50 | 1 of 2 | 30.0 | 10.0 | 0.50 | 0.60 | 1 of 1 | 20.0 | 8.0 |" in text
     assert "| a | lake | A | 10 | 0.0500 | **0.0400** | 0.50 | 0.80 | 0.60 | 20.0 (3; 8.0 s) | **0.0400** |" in text

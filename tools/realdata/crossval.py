@@ -118,8 +118,10 @@ def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float
 
     log = recorded_drive(read_log(data)[0])
     result = drive_recording(log, rules, model, smooth=smooth, snapshots=0, track=track).result  # as rbc drive-log
-    return (round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2),
-            round(result.off_road_s, 2))
+    # Python numbers, not numpy's: a numpy count summed into the JSON would be written as a string
+    takeovers = int(result.interventions)
+    return (round(float(result.eta), 2), takeovers, round(float(result.driving_time_s) / max(1, takeovers), 2),
+            round(float(result.off_road_s), 2))
 
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
@@ -172,9 +174,9 @@ def summarise(scores: Sequence[RecordingScore]) -> list[TrackSummary]:
             round(float(np.mean([s.eta for s in driven])), 2) if driven else None,
             round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None,
             _mean_of([s.r_to_intent for s in mine]), _mean_of([s.intent_r for s in mine]),
-            min(s.eta for s in driven) if driven else None,
-            sum(s.eta >= TARGET_ETA for s in driven) if driven else None,
-            sum(s.interventions or 0 for s in driven) if driven else None))
+            float(min(s.eta for s in driven)) if driven else None,
+            int(sum(s.eta >= TARGET_ETA for s in driven)) if driven else None,
+            int(sum(s.interventions or 0 for s in driven)) if driven else None))
     return out
 
 
