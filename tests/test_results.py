@@ -77,7 +77,7 @@ def test_a_hand_edited_figure_fails(tmp_path):
     shutil.copytree(DOCS, docs)
     page = docs / "results.md"
     text = page.read_text(encoding="utf-8")
-    edited = text.replace("| `unity.onnx` | lake | 96.5 |", "| `unity.onnx` | lake | 99.5 |")
+    edited = re.sub(r"(\| `unity.onnx` \| lake \| )[\d.]+ \|", r"\g<1>12.3 |", text, count=1)  # whatever it was
     assert edited != text
     page.write_text(edited, encoding="utf-8")
     assert results.stale(docs) == ["docs/results.md: headless-laps laps"]
