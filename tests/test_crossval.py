@@ -162,10 +162,31 @@ def test_the_command_writes_its_figures_and_resumes_to_the_same_json(tmp_path: P
     journal = tmp_path / "cv.journal.jsonl"
     journal.write_text(journal.read_text(encoding="utf-8").splitlines()[0] + "\n", encoding="utf-8")  # B unfinished
     out.unlink()
-    again = subprocess.run(cmd, capture_output=True, text=True)
+    again = subprocess.run(cmd + ["--plot", str(tmp_path / "cv.png")], capture_output=True, text=True)
     assert again.returncode == 0, again.stderr
     assert json.loads(out.read_text(encoding="utf-8")) == clean
     assert again.stdout.split("json")[0] == first.stdout.split("json")[0]  # the same tables
+    assert (tmp_path / "cv.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "plot" in again.stdout
+
+
+def test_the_picture_shows_every_driven_recording_by_track(tmp_path: Path) -> None:
+    from tools.realdata.crossval_plot import plot_crossval
+
+    rec = {"fold": "A", "model": "m", "frames": 10, "zero_mse": 0.1, "mse": 0.05, "pearson_r": 0.5}
+    doc = {"folds": {"recordings": [{**rec, "name": "a", "track": "lake", "eta": 99.0},
+                                    {**rec, "name": "b", "track": "jungle", "eta": 91.0},
+                                    {**rec, "name": "c", "track": "mountain", "eta": None}]},
+           "peer": {"recordings": [{**rec, "name": "a", "track": "lake", "eta": 80.0}]}}
+    path = plot_crossval(doc, tmp_path / "cv.png")
+    assert path.read_bytes()[:4] == b"\x89PNG" and list(tmp_path.iterdir()) == [path]  # no temporary file left
+    with pytest.raises(ValueError, match="closed loop"):
+        plot_crossval({"folds": {"recordings": [doc["folds"]["recordings"][2]]}}, tmp_path / "none.png")
+
+
+def test_a_plot_into_a_missing_folder_is_refused_before_any_work(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "tools.cli", "data", "crossval", "--models", str(MODEL),
+                          "--name", "0xR4Y", "--plot", str(tmp_path / "no" / "cv.png")], capture_output=True, text=True)
+    assert out.returncode == 2 and "no folder" in out.stderr and "Traceback" not in out.stderr
 
 
 def test_a_finished_fold_is_never_trained_again_and_an_interrupted_one_continues(

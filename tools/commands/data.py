@@ -114,6 +114,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cv.add_argument("--json", type=Path, default=None, metavar="OUT",
                     help="also write every score as JSON, after each finished fold; its journal OUT.journal.jsonl "
                          "keeps each finished recording, so the same command started again resumes there")
+    cv.add_argument("--plot", type=Path, default=None, metavar="PNG",
+                    help="also draw each recording's closed-loop degree of autonomy, per track, beside the peer's "
+                         "(needs matplotlib: the plots extra)")
 
 
 def _session_gap(parser: argparse.ArgumentParser) -> None:
@@ -152,6 +155,13 @@ def _crossval(args: argparse.Namespace) -> int:
         raise CommandError("--workers must be 1..64")
     rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset,  # they check their own ranges
                       **({} if args.handback is None else {"handback_s": args.handback}))
+    if args.plot:  # before hours of scoring, not after
+        import importlib.util
+
+        if importlib.util.find_spec("matplotlib") is None:
+            raise CommandError("--plot needs matplotlib", 'pip install -e ".[plots]"')
+        if not Path(args.plot).resolve().parent.is_dir():
+            raise CommandError(f"--plot {args.plot}: no folder {Path(args.plot).parent}")
     pattern = args.models or fold_models(args.runs)
     expected = {Path(args.peer)} if args.peer else set()
     if args.recipe:
@@ -200,6 +210,12 @@ def _crossval(args: argparse.Namespace) -> int:
     print(format_tables(results["folds"], results.get("peer", ())))
     if args.json:
         print(f"json  {args.json}")
+    if args.plot and closed:
+        from tools.realdata.crossval_plot import plot_crossval
+
+        plot_crossval({what: {"recordings": [s.as_dict() for s in scores]} for what, scores in results.items()},
+                      args.plot)
+        print(f"plot  {args.plot}")
     return 0
 
 
