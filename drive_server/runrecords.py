@@ -57,8 +57,17 @@ def write_text(path: Path, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
+def json_default(value: Any) -> Any:
+    """What ``json.dumps`` cannot write itself: a numpy number as the number it holds (a numpy count summed into a
+    figure would otherwise be written as the string "22"), anything else (a path, a date) as its text."""
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "shape", None) == ():
+        return item()
+    return str(value)
+
+
 def write_json(path: Path, data: Any, sort_keys: bool = False) -> None:
-    write_text(path, json.dumps(data, indent=2, sort_keys=sort_keys, default=str) + "\n")
+    write_text(path, json.dumps(data, indent=2, sort_keys=sort_keys, default=json_default) + "\n")
 
 
 def read_json(path: Path) -> Any:

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tools.realdata.crossval import RecordingScore, format_tables, model_for, score_recording, summarise
+from tools.realdata.crossval import RecordingScore, model_for, score_recording, summarise
+from tools.realdata.crossval_tables import format_tables
 from tools.realdata.recordings import PublicRecording
 
 DATA = Path(__file__).parent / "data"

@@ -32,6 +32,16 @@ def test_write_json_replaces_atomically_and_leaves_no_temp_file(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ["stats.json"]
 
 
+def test_numpy_numbers_are_written_as_numbers_and_paths_as_text(tmp_path):
+    """A numpy count summed into a figure was written as the string "22" (rbc data crossval's at_least_95)."""
+    import numpy as np
+
+    write_json(tmp_path / "r.json", {"count": sum(np.array([True, False, True])), "eta": np.float32(95.5),
+                                     "n": np.int64(3), "where": tmp_path, "flag": np.bool_(True)})
+    assert json.loads((tmp_path / "r.json").read_text()) == {"count": 2, "eta": 95.5, "n": 3, "where": str(tmp_path),
+                                                             "flag": True}
+
+
 def test_a_failed_write_keeps_the_old_file(tmp_path):
     path = tmp_path / "keep.txt"
     write_text(path, "old")

@@ -118,10 +118,8 @@ def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float
 
     log = recorded_drive(read_log(data)[0])
     result = drive_recording(log, rules, model, smooth=smooth, snapshots=0, track=track).result  # as rbc drive-log
-    # Python numbers, not numpy's: a numpy count summed into the JSON would be written as a string
-    takeovers = int(result.interventions)
-    return (round(float(result.eta), 2), takeovers, round(float(result.driving_time_s) / max(1, takeovers), 2),
-            round(float(result.off_road_s), 2))
+    return (round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2),
+            round(result.off_road_s, 2))
 
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
@@ -185,51 +183,6 @@ def _mean_of(values: Sequence[float | None]) -> float | None:
     return round(float(np.mean(known)), 3) if known else None
 
 
-def _cell(value: float | None, spec: str) -> str:
-    return "–" if value is None else format(value, spec)
-
-
-def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScore] = ()) -> str:
-    """Markdown: the per-track summary, then one row per recording (bold MSE: beats always-0).
-
-    "r to mean" is r against the recorded steering's 9-frame average (what the driver meant); "ceiling" is
-    that average's own r with the recorded steering, about the most any model's r reaches there.
-    """
-    lines = ["| track | recordings | ceiling | mean r | r to mean | beats always-0 | mean eta % | s per take-over |"
-             + (" peer: mean r | r to mean | beats always-0 | mean eta % | s per take-over |" if peer else ""),
-             "|---|---|---|---|---|---|---|---|" + ("---|---|---|---|---|" if peer else "")]
-    peer_by_track = {t.track: t for t in summarise(peer)}
-    for t in summarise(scores):
-        row = (f"| {t.track} | {t.recordings} | {_cell(t.mean_intent_r, '.2f')} | {t.mean_r:.2f} | "
-               f"{_cell(t.mean_r_to_intent, '.2f')} | {t.beats_zero} of {t.recordings} | "
-               f"{_cell(t.mean_eta, '.1f')} | {_cell(t.mean_seconds_per_takeover, '.1f')} |")
-        if peer:
-            p = peer_by_track.get(t.track)
-            row += (f" {p.mean_r:.2f} | {_cell(p.mean_r_to_intent, '.2f')} | {p.beats_zero} of {p.recordings} | "
-                    f"{_cell(p.mean_eta, '.1f')} | {_cell(p.mean_seconds_per_takeover, '.1f')} |"
-                    if p else " – | – | – | – | – |")
-        lines.append(row)
-    lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | ceiling | r to mean | "
-              "eta % (take-overs; s per take-over) |" + (" peer MSE | peer r | peer eta % |" if peer else ""),
-              "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if peer else "")]
-    peer_by_name = {p.name: p for p in peer}
-
-    def mse(s: RecordingScore) -> str:
-        return f"**{s.mse:.4f}**" if s.beats_zero else f"{s.mse:.4f}"
-
-    def loop(s: RecordingScore) -> str:
-        return "–" if s.eta is None else f"{s.eta:.1f} ({s.interventions}; {s.seconds_per_takeover:.1f} s)"
-
-    for s in sorted(scores, key=lambda s: (s.track, s.name.lower())):
-        row = (f"| {s.name} | {s.track} | {s.fold} | {s.frames} | {s.zero_mse:.4f} | {mse(s)} | {s.pearson_r:.2f} | "
-               f"{_cell(s.intent_r, '.2f')} | {_cell(s.r_to_intent, '.2f')} | {loop(s)} |")
-        if peer:
-            p = peer_by_name.get(s.name)
-            row += f" {mse(p)} | {p.pearson_r:.2f} | {loop(p)} |" if p else " – | – | – |"
-        lines.append(row)
-    return "\n".join(lines)
-
-
 # --------------------------------------------------------------------------- a cross-validation that survives a stop
 # Every finished recording's score is appended (and flushed) to a journal the moment it is finished, keyed by
 # everything that determines it: the recording, the model file's content (a retrained fold model is scored
@@ -259,8 +212,6 @@ REPO = Path(__file__).resolve().parents[2]
 
 def measure_version(root: Path = REPO) -> str:
     """A digest of the measuring code's Python sources (:data:`MEASURE_CODE`, under ``root``)."""
-    import hashlib
-
     digest = hashlib.sha256()
     for folder in MEASURE_CODE:
         for path in sorted((root / folder).rglob("*.py")):

@@ -4,11 +4,10 @@ record's copy of it), so the docs' picture and a user's come from the same figur
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
+from drive_server.runrecords import atomic_path
 from tools.realdata.crossval import TARGET_ETA
 
 TRACKS = ("lake", "mountain", "jungle")
@@ -16,7 +15,7 @@ TRACKS = ("lake", "mountain", "jungle")
 
 def plot_crossval(document: dict[str, Any], path: Path) -> Path:
     """Write the picture of ``document`` (``folds`` and optionally ``peer``, each with its ``recordings``) to
-    ``path``; recordings without a closed loop are left out. Written to a temporary file first, then renamed."""
+    ``path``; recordings without a closed loop are left out. Written whole or not at all."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -61,12 +60,9 @@ def plot_crossval(document: dict[str, Any], path: Path) -> Path:
     axes[-1, 0].set_xlabel("degree of autonomy, % (closed loop on the recorded drive, the driver never seen)")
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))  # room for the legend above the panels
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".png")
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
     finally:
         plt.close(fig)
-        Path(tmp).unlink(missing_ok=True)
     return path
