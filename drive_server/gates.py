@@ -23,6 +23,7 @@ from drive_server.limits import (
     close_reason,
     packet_problem,
 )
+from drive_server.patches import eventlet_engineio as wire
 
 if TYPE_CHECKING:
     from drive_server.connections import ConnectionLimiter
@@ -74,59 +75,35 @@ def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str, he
         problem = packet_problem(data)
         if problem is not None:
             faults.report("protocol_error", "%s: protocol error (%s): connection closed", peer, problem)
-            ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, close_reason(problem)))
+            wire.send_close_frame(ws, CLOSE_PROTOCOL_ERROR, close_reason(problem))
             return None  # engine.io then ends the session as if the client had closed it
         return data
 
     ws.wait = wait
 
 
-def websocket_gate_supported() -> tuple[bool, str]:
-    """Whether eventlet's frame parser builds messages through ``self.Message`` (the total-size bound)."""
-    import inspect
-
-    from eventlet.websocket import RFC6455WebSocket
-
-    try:
-        source = inspect.getsource(RFC6455WebSocket._recv_frame)
-    except (OSError, TypeError):
-        return False, "cannot read RFC6455WebSocket._recv_frame"
-    if "self.Message(" not in source or not hasattr(RFC6455WebSocket.Message, "push"):
-        return False, "RFC6455WebSocket._recv_frame does not build messages through self.Message"
-    return True, ""
-
-
 def limited_websocket_class(base: type, limiter: ConnectionLimiter) -> type:
     """A subclass of engine.io's eventlet ``WebSocketWSGI`` that guards every connection it upgrades and
     tells ``limiter`` when each last sent something."""
-    from eventlet.websocket import RFC6455WebSocket
-
     limits, faults = limiter.limits, limiter.faults
-    ok, why = websocket_gate_supported()
+    ok, why = wire.whole_message_bound_supported()
     if not ok:
         log.warning("WebSocket messages bounded only after reassembly (%s)", why)
 
-    class LimitedWebSocketWSGI(base):  # type: ignore[misc, valid-type]
-        def __call__(self, environ: dict[str, Any], start_response: Callable) -> Any:
-            try:
-                return super().__call__(environ, start_response)  # the whole WebSocket session
-            finally:
-                ws = environ.get("rbc.websocket")
-                if ws is not None:
-                    limiter.upgraded.pop(id(ws), None)
+    def on_upgrade(environ: dict[str, Any], ws: Any) -> None:
+        peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
+        heard = [monotonic()]  # the upgrade counts as hearing from it
+        limiter.upgraded[id(ws)] = (ws.socket, heard)
+        if ok:
+            guard_websocket(ws, limits, faults, peer, heard)
+        environ["rbc.websocket"] = ws  # lets the server close this connection with a close frame
 
-        def _handle_hybi_request(self, environ: dict[str, Any]) -> Any:
-            ws = super()._handle_hybi_request(environ)
-            if isinstance(ws, RFC6455WebSocket):
-                peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
-                heard = [monotonic()]  # the upgrade counts as hearing from it
-                limiter.upgraded[id(ws)] = (ws.socket, heard)
-                if ok:
-                    guard_websocket(ws, limits, faults, peer, heard)
-                environ["rbc.websocket"] = ws  # lets the server close this connection with a close frame
-            return ws
+    def on_end(environ: dict[str, Any]) -> None:
+        ws = environ.get("rbc.websocket")
+        if ws is not None:
+            limiter.upgraded.pop(id(ws), None)
 
-    return LimitedWebSocketWSGI
+    return wire.hooked_websocket_class(base, "LimitedWebSocketWSGI", on_upgrade=on_upgrade, on_end=on_end)
 
 
 def _raw_response(environ: dict[str, Any], status: str, body: bytes) -> list[bytes]:

@@ -17,7 +17,7 @@ from dataclasses import replace
 from time import perf_counter
 from typing import Any
 
-from drive_server import listen
+from drive_server import listen, patches
 from drive_server.connections import ConnectionLimiter, protocol_class, shutdown_socket
 from drive_server.gates import limited_websocket_class, polling_gate
 from drive_server.guard import FrameGuard
@@ -26,6 +26,7 @@ from drive_server.limits import (
     FaultLog,
     close_reason,
 )
+from drive_server.patches import eventlet_engineio as wire
 from drive_server.pipeline import DrivePipeline, InferenceError
 from drive_server.runrecords import write_json
 from drive_server.stats import FaultCounters, LatencyStats, save_stats, summarize, summary_line
@@ -52,6 +53,8 @@ SESSION_LOG_INTERVAL_S, SESSION_LOG_BURST = 10.0, 20  # connect/disconnect lines
 #: Connection slots beyond ``max_connections`` in eventlet's pool, so refusals are answered at once
 #: instead of waiting in the accept queue behind a full pool.
 SPARE_SLOTS = 64
+#: engine.io's async backend; its patches of library internals are ``drive_server.patches.BACKENDS[ASYNC_MODE]``.
+ASYNC_MODE = "eventlet"
 #: Bad-input kind of a ``ProtocolError`` by the field its message starts with.
 _INPUT_KINDS = {"image": "image", "speed": "number", "steering_angle": "number", "throttle": "number"}
 
@@ -60,10 +63,11 @@ class DriveServer:
     """Wires the drive pipeline to Socket.IO events: ``telemetry`` in, ``steer``/``manual`` out."""
 
     def __init__(self, pipeline: DrivePipeline, config: ServerConfig | None = None) -> None:
+        patches.check(ASYNC_MODE)  # one warning line for an unchecked library version; refused if a name is gone
         self.pipeline = pipeline
         self.config = config = config or ServerConfig()
         self.sio = UnityCompatibleServer(
-            async_mode="eventlet", logger=False, engineio_logger=False,
+            async_mode=ASYNC_MODE, logger=False, engineio_logger=False,
             async_handlers=False,  # run each event in its reader greenthread: no greenthread spawn per frame
             max_http_buffer_size=config.max_message_bytes, ping_interval=config.ping_interval_s,
             transports=list(config.transports),
@@ -75,9 +79,8 @@ class DriveServer:
         # a client can reconnect in a loop: its connect/disconnect lines are bounded like its faults
         self.session_log = FaultLog(None, SESSION_LOG_INTERVAL_S, logging.INFO, SESSION_LOG_BURST, log)
         eio = self.sio.eio
-        eio._async = dict(eio._async)  # our own copy of the driver table (the module-level one stays stock)
         self.limiter = ConnectionLimiter(self.limits, self.fault_log)  # the cap, shared with the upgraded sockets
-        eio._async["websocket"] = limited_websocket_class(eio._async["websocket"], self.limiter)
+        wire.wrap_websocket_class(eio, lambda base: limited_websocket_class(base, self.limiter))
         self.sio.on_bad_telemetry = self._on_bad_telemetry
         self.sio.on_protocol_error = self._on_protocol_error
         self.clients: dict[str, ClientState] = {}
@@ -193,7 +196,7 @@ class DriveServer:
             if hard:
                 shutdown_socket(ws.socket, reset=True)
             else:
-                ws._send_closing_frame(True, close_data=(CLOSE_PROTOCOL_ERROR, close_reason(reason)))
+                wire.send_close_frame(ws, CLOSE_PROTOCOL_ERROR, close_reason(reason))
         session = self.sio.eio.sockets.get(eio_sid)
         if session is not None and not session.closed:
             session.close(wait=False, abort=ws is not None)  # wait=True could wait forever for a poll

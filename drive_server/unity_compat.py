@@ -12,6 +12,7 @@ from typing import Any
 import socketio
 
 from drive_server.limits import TELEMETRY_EVENT, json_problem
+from drive_server.patches import eventlet_engineio as wire
 
 log = logging.getLogger(__name__)
 
@@ -28,7 +29,12 @@ class UnityCompatibleServer(socketio.Server):
     on_bad_telemetry: Any = None
     on_protocol_error: Any = None
 
-    def _handle_eio_message(self, eio_sid: str, data: Any) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.stock_message = wire.intercept_engine_messages(self, self.handle_message)
+
+    def handle_message(self, eio_sid: str, data: Any) -> None:
+        """Every engine.io message, before python-socketio's own handling (``stock_message``)."""
         session = self.eio.sockets.get(eio_sid)
         if session is None or session.closed or session.closing:
             return  # closed by the server: frames still in flight are dropped, never rejoined
@@ -43,7 +49,7 @@ class UnityCompatibleServer(socketio.Server):
             if data[:1] == "2" and data[1:2] != "/" and self.manager.sid_from_eio_sid(eio_sid, "/") is None:
                 self._join_without_connect_packet(eio_sid)
             try:
-                super()._handle_eio_message(eio_sid, data)
+                self.stock_message(eio_sid, data)
                 return
             except ValueError as exc:  # python-socketio's packet decoder: invalid JSON, bad ids, ...
                 problem = f"invalid Socket.IO packet ({str(exc).splitlines()[0][:80]})"
@@ -63,7 +69,7 @@ class UnityCompatibleServer(socketio.Server):
         log.info("client %s sent an event without a CONNECT packet (the Unity simulator does that): "
                  "joined it to '/'", sid)
         try:
-            self._trigger_event("connect", "/", sid, self.environ.get(eio_sid, {}), None)
+            wire.run_connect_handler(self, sid, self.environ.get(eio_sid, {}))
         except Exception:
             log.exception("connect handler failed for %s", sid)
         return sid
