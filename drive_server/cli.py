@@ -21,6 +21,7 @@ from drive_server.helpformat import DefaultsHelpFormatter
 from drive_server.limits import WireLimits
 from drive_server.model import InferenceConfig, ModelError, SteeringModel
 from drive_server.models_dir import default_model_path
+from drive_server.monitor import MonitorError, MonitorMode, MonitorPolicy
 from drive_server.pipeline import DriveConfig
 from drive_server.server_config import ServerConfig
 from protocol import SpeedUnit
@@ -56,6 +57,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed-unit", "--telemetry-speed-unit", dest="telemetry_speed_unit",
                    choices=[u.value for u in SpeedUnit], default=drive.speed_unit.value,
                    help="unit of the telemetry speed: mph like the stock Udacity simulator, or kmh like the paper's")
+    monitor = MonitorPolicy  # the defaults, defined once
+    p.add_argument("--monitor", choices=[m.value for m in MonitorMode], default=monitor.mode.value,
+                   help="the model's misbehaviour monitor (if its file carries one): off; warn: score every frame "
+                        "and log, show and record warnings and alarms; act: also slow the car on a warning and "
+                        "brake to a stop on an alarm, until the score falls (default %(default)s)")
+    p.add_argument("--monitor-slow", type=float, default=monitor.slow_factor, metavar="FACTOR",
+                   help="with --monitor act, the speed limit on a warning is FACTOR times --speed-limit "
+                        "(default %(default)s)")
     p.add_argument("--threads", type=int, default=inference.threads,
                    help="ONNX Runtime intra-op threads (default %(default)s)")
     p.add_argument("--provider", default=inference.provider,
@@ -130,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         drive = DriveConfig(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit, tau=args.tau,
-                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smooth=args.smooth)
+                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smooth=args.smooth,
+                            monitor=MonitorPolicy(mode=MonitorMode(args.monitor), slow_factor=args.monitor_slow))
         drive.control_law()
         inference = InferenceConfig(threads=args.threads, provider=args.provider)
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
@@ -155,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         model = SteeringModel(model_path, inference)
         model.warm_up()
-    except ModelError as exc:
+        monitor_found = model.monitor() if drive.monitor.mode != MonitorMode.OFF else None
+    except (ModelError, MonitorError) as exc:
         return fail(exc)
 
     # the port too is checked before anything is logged: a port in use is one line, like a bad model
@@ -182,6 +193,14 @@ def main(argv: list[str] | None = None) -> int:
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s%s",
              drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value,
              f", steering smoothed per client (alpha {smooth:g}, {whose})" if smooth < 1 else "")
+    if monitor_found is not None:
+        spec = monitor_found[0]
+        log.info("monitor: %s (%s), warning at %.4g, alarm at %.4g, mean of %d frames%s", spec.score,
+                 drive.monitor.mode.value, spec.warn, spec.alarm, spec.window,
+                 f"; a warning slows to {drive.monitor.slow_factor:g}x the speed limit, an alarm stops the car"
+                 if drive.monitor.mode == MonitorMode.ACT else "")
+    elif drive.monitor.mode != MonitorMode.OFF:
+        log.info("monitor: none (%s carries no misbehaviour monitor)", model_path.name)
     if not listen.is_local(sock.getsockname()[0]):
         log.warning(listen.EXPOSED_WARNING, listen.url(sock).removeprefix("http://"))
     if args.workers > 1:
@@ -191,7 +210,10 @@ def main(argv: list[str] | None = None) -> int:
             return DriveServer(DrivePipeline(SteeringModel(model_path, inference), drive), worker_config)
 
         return serve_workers(args.workers, sock, model, config, make_server, tuning)
-    server = DriveServer(DrivePipeline(model, drive), config)
+    try:
+        server = DriveServer(DrivePipeline(model, drive), config)
+    except UserError as exc:  # e.g. a patched library internal gone after an upgrade (drive_server.patches)
+        return fail(exc)
     server.adopt(sock)
     if args.record is not None:
         from drive_server.recorder import Recorder

@@ -32,6 +32,7 @@ class ClientState:
     unsent: int = 0
     live: Any = None  # the latest answered frame, for the live view (a drive_server.dashboard.LiveFrame)
     smoother: Any = None  # this client's steering smoothing (a drive_server.smoothing.SteeringSmoother; None: off)
+    monitor: Any = None  # this client's misbehaviour monitor (a drive_server.monitor.ClientMonitor; None: off)
 
     def not_reading(self, session: Any, max_pending: int) -> bool:
         """Replies pile up in engine.io's queue, or (checked every 32 replies: one ioctl) in the kernel."""

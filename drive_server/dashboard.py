@@ -42,6 +42,7 @@ class LiveFrame:
     throttle: float  # the command sent, -1..1 (< 0 brakes)
     speed: float  # the telemetry speed, in the server's telemetry unit
     fallback: bool  # the command came from the fallback policy (held or stopped), not the model
+    monitor: Any = None  # the monitor's reading of this frame (a drive_server.monitor.MonitorReading), if any
 
 
 @dataclass(frozen=True)

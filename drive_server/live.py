@@ -19,8 +19,17 @@ def server_view(server: Any) -> dict[str, Any]:
         "model": pipeline.model.path.name, "contract": pipeline.contract.__dict__,
         "control": {"speed_limit_kmh": cfg.speed_limit_kmh, "steer_limit_deg": cfg.steer_limit_deg, "tau": cfg.tau,
                     "speed_unit": cfg.speed_unit.value, "smooth": pipeline.smooth},
+        "monitor": _monitor_view(pipeline),
         "clients": len(server.clients), "viewers": server.dashboard.viewers if server.dashboard else 0,
     }
+
+
+def _monitor_view(pipeline: Any) -> dict[str, Any] | None:
+    spec = pipeline.monitor_spec
+    if spec is None:
+        return None
+    return {"score": spec.score, "warn": spec.warn, "alarm": spec.alarm, "window": spec.window,
+            "mode": pipeline.config.monitor.mode.value}
 
 
 def client_view(client: Any, cfg: Any, with_latency: bool, now: float) -> dict[str, Any]:
@@ -39,6 +48,15 @@ def client_view(client: Any, cfg: Any, with_latency: bool, now: float) -> dict[s
                           "steering_deg": round(frame.steering * cfg.steer_limit_deg, 2),
                           "throttle": round(frame.throttle, 4), "speed": round(frame.speed, 2),
                           "speed_kmh": round(to_kmh(frame.speed, cfg.speed_unit), 2), "fallback": frame.fallback}
+        if frame.monitor is not None:
+            entry["frame"]["monitor"] = {"score": round(frame.monitor.score, 5), "mean": round(frame.monitor.mean, 5),
+                                         "state": frame.monitor.level.label}
+    monitor = getattr(client, "monitor", None)
+    if monitor is not None:
+        entry["counters"].update({"monitor warnings": monitor.state.episodes["warning"],
+                                  "monitor alarms": monitor.state.episodes["alarm"]})
+        if monitor.failed:
+            entry["monitor_failed"] = monitor.failed
     if with_latency:
         recent = summarize([stats], since={stats.name: stats.recorded - RECENT_FRAMES})["stages_ms"]
         entry["latency"] = {stage: {"p50": recent[stage]["p50"], "p99": recent[stage]["p99"]}

@@ -15,6 +15,7 @@ import numpy as np
 import onnxruntime as ort
 
 from drive_server.contract import METADATA_KEY, ContractError, PreprocessContract, infer_contract
+from drive_server.monitor import MonitorGraph, MonitorSpec, read_monitor
 from drive_server.smoothing import SERVING_KEY, serving_alpha
 from protocol.errors import BadValue, UserError
 
@@ -93,6 +94,16 @@ class SteeringModel:
         except ValueError as exc:
             raise ModelError(f"{path.name}: {exc}") from None
         self._outputs = [self.output_name]
+        self._monitor: tuple[MonitorSpec, MonitorGraph] | None = None
+        self._monitor_read = False
+
+    def monitor(self) -> tuple[MonitorSpec, MonitorGraph] | None:
+        """The misbehaviour monitor the file carries (None: none); read on first use, so a model whose monitor
+        is broken still serves with ``--monitor off``. Raises ``MonitorError`` (one line) if it is unusable."""
+        if not self._monitor_read:
+            self._monitor = read_monitor(self._session.get_modelmeta().custom_metadata_map, self.path.name)
+            self._monitor_read = True
+        return self._monitor
 
     def _contract(self) -> tuple[PreprocessContract, str]:
         meta = self._session.get_modelmeta().custom_metadata_map

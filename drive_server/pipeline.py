@@ -14,6 +14,7 @@ import numpy as np
 
 from drive_server.control import ControlLaw
 from drive_server.model import SteeringModel
+from drive_server.monitor import ClientMonitor, Level, MonitorPolicy, MonitorReading, act_on
 from drive_server.preprocess import jpeg_reduction, preprocess
 from drive_server.smoothing import OFF, SteeringSmoother, check_alpha
 from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
@@ -35,6 +36,7 @@ class DriveConfig:
     tau: float = ControlLaw.tau
     speed_unit: SpeedUnit = SpeedUnit.MPH
     smooth: float | None = None
+    monitor: MonitorPolicy = MonitorPolicy()  # what is done with the model's monitor, if it carries one
 
     def __post_init__(self) -> None:
         if self.smooth is not None:
@@ -54,6 +56,15 @@ class DrivePipeline:
         self.contract = model.contract
         self.reduce = jpeg_reduction(model.contract)
         self.smooth = model.smooth if config.smooth is None else config.smooth
+        self._slow_laws: dict[float, ControlLaw] = {}
+        found = model.monitor() if config.monitor.mode != "off" else None
+        self.monitor_spec, self._monitor_graph = found if found is not None else (None, None)
+
+    def client_monitor(self, who: str = "") -> ClientMonitor | None:
+        """A new client's monitor state (None: the model carries no monitor, or it is off)."""
+        if self._monitor_graph is None or self.monitor_spec is None:
+            return None
+        return ClientMonitor(self._monitor_graph, self.monitor_spec, self.config.monitor, who)
 
     def smoother(self) -> SteeringSmoother | None:
         """A new client's smoothing state (None when off: nothing to keep)."""
@@ -72,17 +83,31 @@ class DrivePipeline:
             raise InferenceError(f"model output is not finite: {value!r}")
         return max(-1.0, min(1.0, value))
 
-    def control(self, steering: float, speed: float) -> SteerCommand:
-        """Eq. 14 on the predicted steering (converted to degrees) and the telemetry speed."""
-        throttle = self.law.command(steering * self.config.steer_limit_deg, to_kmh(speed, self.config.speed_unit))
+    def control(self, steering: float, speed: float, reading: MonitorReading | None = None) -> SteerCommand:
+        """Eq. 14 on the predicted steering (converted to degrees) and the telemetry speed; with ``--monitor act``
+        a monitor's warning lowers the speed limit and its alarm brakes (steering is never changed)."""
+        steering_deg, speed_kmh = steering * self.config.steer_limit_deg, to_kmh(speed, self.config.speed_unit)
+        if reading is None or self.config.monitor.mode != "act" or reading.level == Level.NORMAL:
+            return SteerCommand(steering=steering, throttle=self.law.command(steering_deg, speed_kmh))
+        throttle = act_on(reading.level, self._throttle_at, steering_deg, speed_kmh, self.config.monitor)
         return SteerCommand(steering=steering, throttle=throttle)
 
-    def run(self, telemetry: Telemetry, smoother: SteeringSmoother | None = None
-            ) -> tuple[SteerCommand, tuple[float, float, float, float]]:
+    def _throttle_at(self, steering_deg: float, speed_kmh: float, factor: float) -> float:
+        """Eq. 14 with the speed limit times ``factor`` (the monitor's slow-down)."""
+        law = self.law if factor == 1.0 else self._slow_laws.get(factor)
+        if law is None:
+            law = self._slow_laws[factor] = ControlLaw(self.law.speed_limit_kmh * factor, self.law.steer_limit_deg,
+                                                       self.law.tau)
+        return law.command(steering_deg, speed_kmh)
+
+    def run(self, telemetry: Telemetry, smoother: SteeringSmoother | None = None,
+            monitor: ClientMonitor | None = None) -> tuple[SteerCommand, tuple[float, float, float, float]]:
         """Command for one parsed frame and the durations (s) of decode, preprocess, inference, control.
 
         ``smoother``: the client's own smoothing state (:meth:`smoother`), applied before the control
-        law, so throttle and brake answer the steering that is sent.
+        law, so throttle and brake answer the steering that is sent. ``monitor``: the client's monitor
+        (:meth:`client_monitor`); it scores the same preprocessed input after steering is known, its reading
+        is ``monitor.last``, its time is in the last stage, and a failure of it never reaches steering.
 
         Raises ``ProtocolError`` for an unusable image and ``InferenceError`` for an unusable output.
         """
@@ -94,7 +119,8 @@ class DrivePipeline:
         value = self.model.predict(x)
         t3 = perf_counter()
         steering = self._usable(value)
-        command = self.control(smoother(steering) if smoother is not None else steering, telemetry.speed)
+        reading = monitor.observe(x) if monitor is not None else None
+        command = self.control(smoother(steering) if smoother is not None else steering, telemetry.speed, reading)
         t4 = perf_counter()
         return command, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)
 

@@ -4,7 +4,9 @@ Like Udacity's ``drive.py FOLDER``, but off the drive loop: the Socket.IO handle
 base64 text and the command on a bounded queue (a microsecond); a background thread decodes the base64
 and writes ``IMG/center_<time>.jpg`` (the received JPEG bytes, not re-encoded) and one ``driving_log.csv``
 row through :mod:`protocol.datalog_writer`, so ``rbc train`` and ``rbc video`` read the recording like any
-other. If the disk cannot keep up, frames are dropped and counted rather than slowing the car; a full
+other. With a misbehaviour monitor on, each frame's score, one-second mean and state go to ``monitor.csv`` beside
+the log (frame name first), so the Udacity log keeps its seven columns.
+If the disk cannot keep up, frames are dropped and counted rather than slowing the car; a full
 disk or an unwritable folder is logged (at most every few seconds) and counted, and the server drives on.
 """
 
@@ -21,12 +23,16 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from protocol import SteerCommand
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name, last_row_stamp
 
 log = logging.getLogger(__name__)
 
+#: The monitor's side file: one row per recorded frame that the monitor scored.
+MONITOR_LOG = "monitor.csv"
+MONITOR_HEADER = "frame,score,mean,state\n"
 #: Frames waiting for the disk before new ones are dropped: ~68 s at 15 Hz, at most ~21 MB of base64.
 QUEUE_FRAMES = 1024
 #: At most one warning about failed writes in this many seconds.
@@ -58,6 +64,7 @@ class Recorder:
         self._last_warning = -float("inf")
         self._writer: LogWriter | None = None
         self._last_ms = 0
+        self._monitor_log: Any = None  # opened on the first frame with a monitor reading
         try:
             (self.folder / IMAGE_DIR).mkdir(parents=True, exist_ok=True)
             self._images = (self.folder / IMAGE_DIR).resolve()
@@ -75,14 +82,15 @@ class Recorder:
         log.info("recording every answered frame to %s", self.folder / LOG_NAME)
 
     # -- the drive loop's side -----------------------------------------------------------------------
-    def record(self, image_b64: str, command: SteerCommand, speed: float) -> None:
-        """Queue one answered frame (called in the Socket.IO handler, after the reply went out)."""
+    def record(self, image_b64: str, command: SteerCommand, speed: float, monitor: Any = None) -> None:
+        """Queue one answered frame (called in the Socket.IO handler, after the reply went out); ``monitor``: the
+        monitor's reading of it (a drive_server.monitor.MonitorReading), if one scored it."""
         self.counts.received += 1
         if self._thread is None:
             self.counts.failed += 1
             return
         try:
-            self._queue.put_nowait((time.time(), image_b64, command.steering, command.throttle, speed))
+            self._queue.put_nowait((time.time(), image_b64, command.steering, command.throttle, speed, monitor))
         except queue.Full:
             self.counts.dropped += 1
 
@@ -102,7 +110,8 @@ class Recorder:
                 self.counts.failed += 1
                 self._warn(exc)
 
-    def _write(self, when: float, image_b64: str, steering: float, throttle: float, speed: float) -> None:
+    def _write(self, when: float, image_b64: str, steering: float, throttle: float, speed: float,
+               monitor: Any = None) -> None:
         ms = max(int(when * 1000), self._last_ms + 1)  # unique, increasing names even at 1,000 frames/s
         self._last_ms = ms
         name = frame_name("center", dt.datetime.fromtimestamp(ms / 1000))
@@ -117,6 +126,14 @@ class Recorder:
             path.unlink(missing_ok=True)  # a full disk: no row, and no cut-off image without one
             raise
         self.counts.recorded += 1
+        if monitor is not None:
+            if self._monitor_log is None:
+                side = self.folder / MONITOR_LOG
+                new = not side.exists() or side.stat().st_size == 0
+                self._monitor_log = side.open("a", encoding="utf-8", newline="")
+                if new:
+                    self._monitor_log.write(MONITOR_HEADER)
+            self._monitor_log.write(f"{name},{monitor.score:.6g},{monitor.mean:.6g},{monitor.level.label}\n")
 
     def _warn(self, exc: BaseException) -> None:
         now = time.monotonic()
@@ -134,6 +151,10 @@ class Recorder:
                 self._queue.put(None, timeout=timeout)
             self._thread.join(timeout)
             self._thread = None
+        if self._monitor_log is not None:
+            with contextlib.suppress(OSError):
+                self._monitor_log.close()
+            self._monitor_log = None
         if self._writer is not None:
             try:
                 self._writer.close()

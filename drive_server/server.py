@@ -118,7 +118,7 @@ class DriveServer:
         ws = self.sio.environ.get(eio_sid, {}).get("rbc.websocket") if eio_sid else None
         return ClientState(sid, eio_sid, self.transport.direct_reply and eio_sid is not None, agent,
                            LatencyStats(sid), FrameGuard(self.config.fallback), socket=getattr(ws, "socket", None),
-                           smoother=self.pipeline.smoother())
+                           smoother=self.pipeline.smoother(), monitor=self.pipeline.client_monitor(sid))
 
     def _client(self, sid: str) -> ClientState:
         client = self.clients.get(sid)
@@ -159,7 +159,7 @@ class DriveServer:
                 self._reply(client, "manual", {})
                 return
             t_parse = perf_counter() - t0
-            command, (decode, pre, infer, control) = self.pipeline.run(telemetry, client.smoother)
+            command, (decode, pre, infer, control) = self.pipeline.run(telemetry, client.smoother, client.monitor)
             t4 = perf_counter()
             sent = client.guard.good(command)
             self._reply(client, "steer", encode_steer(sent))
@@ -176,9 +176,11 @@ class DriveServer:
             return
         client.stats.record((t_parse + decode, pre, infer, control + (t5 - t4), t5 - t0))
         if self.recorder is not None:  # after the reply: recording never delays the simulator
-            self.recorder.record(telemetry.image_b64, sent, telemetry.speed)
+            self.recorder.record(telemetry.image_b64, sent, telemetry.speed,
+                                 client.monitor.last if client.monitor is not None else None)
         if self.dashboard is not None:  # one assignment: the live view reads it off the hot path
-            client.live = LiveFrame(t0, telemetry.image_b64, sent.steering, sent.throttle, telemetry.speed, False)
+            client.live = LiveFrame(t0, telemetry.image_b64, sent.steering, sent.throttle, telemetry.speed, False,
+                                    client.monitor.last if client.monitor is not None else None)
 
     def _on_bad_telemetry(self, sid: str, kind: str, reason: str) -> None:
         """A telemetry event too broken to decode (JSON too deep, a huge number): answered all the same."""

@@ -14,6 +14,8 @@ function showModel(server) {
     ["model", server.model], ["input", `${k.width}x${k.height} ${k.color}, rows ${k.crop_top}-${k.crop_bottom}, x*${k.scale.toPrecision(3)}${k.offset >= 0 ? "+" : ""}${k.offset}, ${k.layout}`],
     ["control law", `speed limit ${c.speed_limit_kmh} km/h, steering limit ${c.steer_limit_deg}°, tau ${c.tau}, telemetry speed in ${c.speed_unit}`],
   ];
+  const m = server.monitor;
+  rows.push(["monitor", m ? `${m.score}, ${m.mode}: warning at ${m.warn.toPrecision(3)}, alarm at ${m.alarm.toPrecision(3)} (mean of ${m.window} frames)` : "none"]);
   el(document, "#model").innerHTML = "<dl>" + rows.map(([a, b]) => `<dt>${a}</dt><dd>${b}</dd>`).join("") + "</dl>";
   el(document, "#server").textContent = `${server.clients} simulator(s) connected, ${server.viewers} viewer(s); updated ${new Date().toLocaleTimeString()}`;
 }
@@ -69,6 +71,9 @@ function showClient(c, now) {
     el(r, ".pedal-text").textContent = f.throttle > -0.005 ? `throttle ${f.throttle.toFixed(2)}` : `brake ${(-f.throttle).toFixed(2)}`;
     el(r, ".speed-text").textContent = `${f.speed.toFixed(1)} ${c.speed_unit}`;
     el(r, ".source").textContent = f.fallback ? "command: fallback (bad frame: held or stopping)" : "command: the model's";
+    const mon = el(r, ".monitor");
+    mon.textContent = f.monitor ? `monitor: ${f.monitor.state} (score ${f.monitor.mean.toPrecision(3)})` : (c.monitor_failed ? `monitor off: ${c.monitor_failed}` : "");
+    mon.className = "monitor" + (f.monitor ? " m-" + f.monitor.state : "");
     p.history.push([now, f.steering, f.throttle, f.speed_kmh]);
   }
   while (p.history.length && now - p.history[0][0] > HISTORY_S) p.history.shift();

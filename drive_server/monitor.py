@@ -1,0 +1,279 @@
+"""The misbehaviour monitor: a score per camera frame, averaged over one second, against thresholds calibrated on
+nominal driving, so the server can warn, slow down or stop BEFORE the car leaves the road.
+
+Why the score runs in its own ONNX Runtime session: a monitor that raises, answers NaN or runs slow must never
+touch steering. The monitor's graph travels inside the steering model's file (metadata ``rbc.monitor.onnx``,
+base64), with its spec and thresholds (``rbc.monitor``), so one file carries steering, monitor and calibration
+and the steering graph itself is byte for byte what it was. A model without them serves exactly as before.
+
+States: ``normal``; ``warning`` once the one-second mean reaches the warning threshold; ``alarm`` once it
+reaches the alarm threshold. Either is held until the mean has stayed below the warning threshold for
+``release_frames`` frames (the hand-back). With ``--monitor act`` a warning lowers the speed limit of the
+coupled control law (the car slows, steering untouched) and an alarm brakes to a stop.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import logging
+import math
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from enum import IntEnum, StrEnum
+from time import perf_counter
+from typing import Any
+
+import numpy as np
+import onnxruntime as ort
+
+from protocol.errors import BadValue, UserError
+
+log = logging.getLogger(__name__)
+
+#: ONNX metadata key of the monitor's spec and calibration (JSON, :class:`MonitorSpec`).
+MONITOR_KEY = "rbc.monitor"
+#: ONNX metadata key of the monitor's own graph (base64 of an ONNX file: preprocessed input -> one score).
+MONITOR_GRAPH_KEY = "rbc.monitor.onnx"
+#: Frames per second of the Udacity simulator's telemetry: the one-second window's length by default.
+FRAMES_PER_SECOND = 15
+
+
+class MonitorError(UserError):
+    """A model file's monitor cannot be used; the message is one line."""
+
+    hint = "attach a monitor with `rbc monitor fit`, or serve with --monitor off"
+
+
+class MonitorMode(StrEnum):
+    """What the server does with the monitor: nothing, report its state, or also act on it."""
+
+    OFF = "off"
+    WARN = "warn"
+    ACT = "act"
+
+
+class Level(IntEnum):
+    NORMAL = 0
+    WARNING = 1
+    ALARM = 2
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+
+@dataclass(frozen=True)
+class MonitorSpec:
+    """What a model file says of its monitor: the score's name, the window and the calibrated thresholds."""
+
+    score: str  # e.g. "autoencoder": the reconstruction error of a small autoencoder (SelfOracle's idea)
+    warn: float  # threshold of the window mean for a warning
+    alarm: float  # ... and for an alarm (>= warn)
+    window: int = FRAMES_PER_SECOND  # frames averaged (one second at the simulator's 15 Hz)
+    calibration: dict[str, Any] = field(default_factory=dict)  # how the thresholds were set (data, quantiles)
+
+    def __post_init__(self) -> None:
+        if not self.score or not isinstance(self.score, str):
+            raise BadValue(f"{MONITOR_KEY}: 'score' must name the score, got {self.score!r}")
+        for name in ("warn", "alarm"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise BadValue(f"{MONITOR_KEY}: '{name}' must be a finite number, got {value!r}")
+        if self.alarm < self.warn:
+            raise BadValue(f"{MONITOR_KEY}: the alarm threshold ({self.alarm:g}) is below the warning's "
+                           f"({self.warn:g})")
+        if not isinstance(self.window, int) or not 1 <= self.window <= 10 * FRAMES_PER_SECOND:
+            raise BadValue(f"{MONITOR_KEY}: 'window' must be 1..{10 * FRAMES_PER_SECOND} frames, got {self.window!r}")
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> MonitorSpec:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise BadValue(f"{MONITOR_KEY} is not valid JSON: {exc}") from None
+        if not isinstance(data, dict):
+            raise BadValue(f"{MONITOR_KEY} must be a JSON object")
+        unknown = set(data) - {"score", "warn", "alarm", "window", "calibration"}
+        if unknown:
+            raise BadValue(f"{MONITOR_KEY}: unknown keys {sorted(unknown)}")
+        try:
+            return cls(**data)
+        except TypeError as exc:
+            raise BadValue(f"{MONITOR_KEY}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class MonitorPolicy:
+    """How the server uses the monitor. The defaults are defined here once; the CLI's flags read them."""
+
+    mode: MonitorMode = MonitorMode.WARN
+    slow_factor: float = 0.5  # on a warning (act), the control law's speed limit times this
+    release_frames: int = FRAMES_PER_SECOND  # frames below the warning threshold before handing back
+    budget_ms: float = 5.0  # a monitor slower than this on ``strikes`` frames in a row is switched off
+    strikes: int = 3
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.slow_factor <= 1.0:
+            raise BadValue(f"monitor slow factor must be above 0 and at most 1, got {self.slow_factor}")
+        if self.release_frames < 1:
+            raise BadValue(f"monitor release frames must be >= 1, got {self.release_frames}")
+        if not self.budget_ms > 0 or self.strikes < 1:
+            raise BadValue(f"monitor budget must be > 0 ms with >= 1 strike, got {self.budget_ms} ms, "
+                           f"{self.strikes}")
+
+
+class MonitorFault(RuntimeError):
+    """The monitor failed on a frame (raised, answered a non-finite score, or ran over its budget)."""
+
+
+class MonitorGraph:
+    """The monitor's ONNX graph in its own one-thread session: preprocessed input in, one score out."""
+
+    def __init__(self, model_bytes: bytes, name: str = "monitor") -> None:
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = options.inter_op_num_threads = 1
+        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        options.log_severity_level = 4
+        try:
+            self._session = ort.InferenceSession(model_bytes, options, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # ORT raises several types for a bad graph
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise MonitorError(f"{name}: the monitor's graph cannot be loaded: {first}") from None
+        inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
+        if len(inputs) != 1 or len(outputs) != 1:
+            raise MonitorError(f"{name}: the monitor's graph must have one input and one output")
+        self.input_name, self.output_name = inputs[0].name, outputs[0].name
+
+    def score(self, x: np.ndarray) -> float:
+        """The score of one preprocessed input batch of 1 (raises whatever ONNX Runtime raises)."""
+        out = self._session.run([self.output_name], {self.input_name: x})[0]
+        return float(np.asarray(out).reshape(-1)[0])
+
+
+def read_monitor(meta: dict[str, str], name: str) -> tuple[MonitorSpec, MonitorGraph] | None:
+    """The monitor a model file's metadata carries (None: it carries none); MonitorError if it is unusable."""
+    if MONITOR_KEY not in meta and MONITOR_GRAPH_KEY not in meta:
+        return None
+    if MONITOR_KEY not in meta or MONITOR_GRAPH_KEY not in meta:
+        raise MonitorError(f"{name}: the monitor needs both {MONITOR_KEY} and {MONITOR_GRAPH_KEY} in the metadata")
+    try:
+        spec = MonitorSpec.from_json(meta[MONITOR_KEY])
+    except BadValue as exc:
+        raise MonitorError(f"{name}: {exc}") from None
+    try:
+        graph_bytes = base64.b64decode(meta[MONITOR_GRAPH_KEY], validate=True)
+    except (binascii.Error, ValueError):
+        raise MonitorError(f"{name}: {MONITOR_GRAPH_KEY} is not base64") from None
+    return spec, MonitorGraph(graph_bytes, name)
+
+
+def encode_graph(model_bytes: bytes) -> str:
+    """The ``rbc.monitor.onnx`` metadata value for a monitor graph."""
+    return base64.b64encode(model_bytes).decode("ascii")
+
+
+@dataclass
+class MonitorReading:
+    """The monitor's view of one frame: its own score, the window mean and the state it leads to."""
+
+    score: float
+    mean: float
+    level: Level
+
+
+class MonitorState:
+    """One client's monitor: the window of recent scores and the state machine (warning, alarm, hand-back).
+
+    Pure and cheap: a deque and a running sum, so the scripted-score tests drive it without a model.
+    """
+
+    def __init__(self, spec: MonitorSpec, policy: MonitorPolicy = MonitorPolicy()) -> None:
+        self.spec, self.policy = spec, policy
+        self._scores: deque[float] = deque(maxlen=spec.window)
+        self._sum = 0.0
+        self.level = Level.NORMAL
+        self._calm = 0  # frames in a row with the window mean below the warning threshold
+        self.counts = {level.label: 0 for level in Level}  # frames per state
+        self.episodes = {Level.WARNING.label: 0, Level.ALARM.label: 0}  # entries into each state
+
+    def update(self, score: float) -> MonitorReading:
+        if not math.isfinite(score):
+            raise MonitorFault(f"monitor score is not finite: {score!r}")
+        if len(self._scores) == self._scores.maxlen:
+            self._sum -= self._scores[0]
+        self._scores.append(score)
+        self._sum += score
+        mean = self._sum / len(self._scores)
+        now = Level.ALARM if mean >= self.spec.alarm else Level.WARNING if mean >= self.spec.warn else Level.NORMAL
+        self._calm = self._calm + 1 if now == Level.NORMAL else 0
+        if now > self.level:
+            self.episodes[now.label] += 1
+            self.level = now
+        elif self._calm >= self.policy.release_frames:
+            self.level = Level.NORMAL  # hand back
+        self.counts[self.level.label] += 1
+        return MonitorReading(score, mean, self.level)
+
+    def reset(self) -> None:
+        self._scores.clear()
+        self._sum, self._calm, self.level = 0.0, 0, Level.NORMAL
+
+
+class ClientMonitor:
+    """A client's monitor as the server runs it: scores a frame within the policy's budget, and on any
+    failure switches itself off for that client, reported once, leaving steering untouched."""
+
+    def __init__(self, graph: MonitorGraph, spec: MonitorSpec, policy: MonitorPolicy, who: str = "") -> None:
+        self.graph, self.state, self.policy, self.who = graph, MonitorState(spec, policy), policy, who
+        self.failed: str | None = None  # why it was switched off
+        self._slow = 0
+        self.last: MonitorReading | None = None
+        self.seconds = 0.0  # time spent in the monitor, for the stage timings
+
+    def observe(self, x: np.ndarray) -> MonitorReading | None:
+        """The reading for one preprocessed frame, or None once the monitor is off (never raises)."""
+        if self.failed is not None:
+            return None
+        t0 = perf_counter()
+        before = self.state.level
+        try:
+            reading = self.state.update(self.graph.score(x))
+        except Exception as exc:  # a monitor that fails never stops steering: it is switched off
+            self._fail(f"{type(exc).__name__}: {exc}"[:200])
+            return None
+        finally:
+            self.seconds = perf_counter() - t0
+        self._slow = self._slow + 1 if self.seconds * 1000 > self.policy.budget_ms else 0
+        if self._slow >= self.policy.strikes:
+            self._fail(f"over its budget of {self.policy.budget_ms:g} ms on {self._slow} frames in a row")
+            return None
+        self.last = reading
+        if reading.level != before:  # at most one line per release_frames frames: the state is held that long
+            who = f"client {self.who}: " if self.who else ""
+            if reading.level > before:
+                log.warning("%smonitor %s: score %.4g over the last second (warning at %.4g, alarm at %.4g)", who,
+                            reading.level.label, reading.mean, self.state.spec.warn, self.state.spec.alarm)
+            else:
+                log.info("%smonitor back to normal: score %.4g", who, reading.mean)
+        return reading
+
+    def _fail(self, why: str) -> None:
+        self.failed = why
+        self.last = None
+        log.warning("monitor switched off%s: %s; steering goes on unmonitored",
+                    f" for client {self.who}" if self.who else "", why)
+
+
+def act_on(level: Level, throttle_at: Any, steering_deg: float, speed_kmh: float, policy: MonitorPolicy) -> float:
+    """The throttle (-1..1, < 0 brakes) of ``act`` for a state: the control law as is when normal, at a lowered
+    speed limit on a warning, full brake while moving on an alarm (0 once stopped: the car waits)."""
+    if level == Level.ALARM:
+        return -1.0 if speed_kmh > 0.5 else 0.0
+    if level == Level.WARNING:
+        return throttle_at(steering_deg, speed_kmh, policy.slow_factor)
+    return throttle_at(steering_deg, speed_kmh, 1.0)

@@ -1,0 +1,100 @@
+"""SelfOracle's idea (Stocco et al., ICSE 2020) on the model's own input: a small convolutional autoencoder
+learns to reproduce the frames of nominal driving, and its reconstruction error is high on what it never saw
+(fog, night, a new road, the car off its line).
+
+Why on the preprocessed input and not the camera frame: drive_server already computes it for steering, so the
+monitor adds one small network and no second decode or resize. The exported graph takes exactly the steering
+model's input and answers one score, the mean squared error over the pixels.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from torch import nn
+
+from drive_server.contract import PreprocessContract
+
+log = logging.getLogger(__name__)
+
+SCORE_NAME = "autoencoder"
+
+
+class ConvAutoencoder(nn.Module):
+    """Three stride-2 convolutions down to an 8-channel code at 1/8 of the size, and back (about 30k weights)."""
+
+    def __init__(self, channels_last: bool, width: int = 24, code: int = 8) -> None:
+        super().__init__()
+        self.channels_last = channels_last
+        self.encode = nn.Sequential(
+            nn.Conv2d(3, width, 3, 2, 1), nn.ReLU(),
+            nn.Conv2d(width, width, 3, 2, 1), nn.ReLU(),
+            nn.Conv2d(width, width, 3, 2, 1), nn.ReLU(),
+            nn.Conv2d(width, code, 1))
+        self.decode = nn.Sequential(
+            nn.ConvTranspose2d(code, width, 4, 2, 1), nn.ReLU(),
+            nn.ConvTranspose2d(width, width, 4, 2, 1), nn.ReLU(),
+            nn.ConvTranspose2d(width, 3, 4, 2, 1))
+
+    def reconstruct(self, x: torch.Tensor) -> torch.Tensor:
+        """``x`` in the steering model's layout, reconstructed in NCHW."""
+        if self.channels_last:
+            x = x.permute(0, 3, 1, 2)
+        return self.decode(self.encode(x))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The per-frame score: mean squared reconstruction error (shape N)."""
+        target = x.permute(0, 3, 1, 2) if self.channels_last else x
+        return ((self.reconstruct(x) - target) ** 2).mean(dim=(1, 2, 3))
+
+
+def train_autoencoder(frames: np.ndarray, contract: PreprocessContract, epochs: int = 6, batch_size: int = 128,
+                      lr: float = 2e-3, seed: int = 0,
+                      progress: Callable[[int, int, float], None] | None = None) -> ConvAutoencoder:
+    """Fit on preprocessed frames (N, ...) in the contract's layout; ``progress(epoch, epochs, loss)``."""
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    h, w = contract.height, contract.width
+    if h % 8 or w % 8:
+        raise ValueError(f"the autoencoder needs an input size divisible by 8, the contract's is {w}x{h}")
+    model = ConvAutoencoder(channels_last=contract.layout.lower() == "nhwc")
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs * max(1, len(frames) // batch_size))
+    data = torch.from_numpy(np.ascontiguousarray(frames, dtype=np.float32))
+    for epoch in range(epochs):
+        model.train()
+        order = rng.permutation(len(data))
+        total, count = 0.0, 0
+        for start in range(0, len(order) - batch_size + 1, batch_size):
+            batch = data[torch.from_numpy(order[start:start + batch_size])]
+            loss = model(batch).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total, count = total + float(loss) * len(batch), count + len(batch)
+        if progress is not None:
+            progress(epoch + 1, epochs, total / max(1, count))
+    return model.eval()
+
+
+def scores(model: ConvAutoencoder, frames: np.ndarray, batch_size: int = 512) -> np.ndarray:
+    """Per-frame scores of preprocessed frames, in order."""
+    out = []
+    with torch.no_grad():
+        for start in range(0, len(frames), batch_size):
+            out.append(model(torch.from_numpy(np.ascontiguousarray(frames[start:start + batch_size]))).numpy())
+    return np.concatenate(out) if out else np.zeros(0, np.float32)
+
+
+def export_score_graph(model: ConvAutoencoder, contract: PreprocessContract) -> bytes:
+    """The ONNX graph drive_server runs: the steering model's input (batch 1 or more) -> one score per frame."""
+    example = torch.zeros(contract.input_shape, dtype=torch.float32)
+    buffer = io.BytesIO()
+    torch.onnx.export(model.eval(), (example,), buffer, input_names=["input"], output_names=["score"],
+                      dynamic_axes={"input": {0: "batch"}, "score": {0: "batch"}}, opset_version=17, dynamo=False)
+    return buffer.getvalue()

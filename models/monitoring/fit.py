@@ -1,0 +1,73 @@
+"""``rbc monitor fit``'s work: train the autoencoder on nominal frames, calibrate it on other nominal runs, and
+write the steering model's file with the monitor attached."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drive_server.model import SteeringModel
+from drive_server.monitor import FRAMES_PER_SECOND, MonitorSpec
+from models.monitoring.attach import attach_monitor
+from models.monitoring.autoencoder import SCORE_NAME, export_score_graph, scores, train_autoencoder
+from models.monitoring.calibrate import calibrate
+from models.monitoring.frames import load_runs
+from protocol.errors import BadValue
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FitPlan:
+    """What to fit: the defaults are defined here once; ``rbc monitor fit``'s flags read them."""
+
+    model: Path
+    out: Path
+    train: tuple[Path, ...]
+    calibration: tuple[Path, ...]
+    epochs: int = 6
+    stride: int = 2  # every 2nd training frame: neighbours at 15 Hz are near copies
+    seed: int = 0
+    window: int = FRAMES_PER_SECOND
+    warnings_per_hour: float = 10.0
+    alarms_per_hour: float = 1.0
+
+    def __post_init__(self) -> None:
+        overlap = {p.resolve() for p in self.train} & {p.resolve() for p in self.calibration}
+        if overlap:
+            raise BadValue(f"calibration data must be other runs than the training data; both have "
+                           f"{', '.join(sorted(str(p) for p in overlap))}")
+        if not self.train or not self.calibration:
+            raise BadValue("give training data (--data) and calibration data (--calibration)")
+        if self.epochs < 1 or self.stride < 1:
+            raise BadValue(f"epochs and stride must be >= 1, got {self.epochs} and {self.stride}")
+
+
+@dataclass
+class FitResult:
+    spec: MonitorSpec
+    train_frames: int
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def fit_monitor(plan: FitPlan, say: Any = log.info) -> FitResult:
+    contract = SteeringModel(plan.model).contract
+    say(f"reading training frames from {len(plan.train)} folder(s) (every {plan.stride}. frame)")
+    train = np.concatenate(load_runs(list(plan.train), contract, plan.stride,
+                                     progress=lambda d, t: say(f"  {d:,} of {t:,} frames")))
+    say(f"training the autoencoder on {len(train):,} frames, {plan.epochs} epochs")
+    model = train_autoencoder(train, contract, epochs=plan.epochs, seed=plan.seed,
+                              progress=lambda e, n, loss: say(f"  epoch {e}/{n}: reconstruction error {loss:.5f}"))
+    say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
+    runs = load_runs(list(plan.calibration), contract, 1, progress=lambda d, t: say(f"  {d:,} of {t:,} frames"))
+    cal = calibrate([scores(model, r) for r in runs], plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
+                    source=", ".join(p.name for p in plan.calibration))
+    record = {**cal.record, "train_frames": int(len(train)), "train": [p.name for p in plan.train],
+              "epochs": plan.epochs, "seed": plan.seed}
+    spec = MonitorSpec(SCORE_NAME, cal.warn, cal.alarm, plan.window, record)
+    attach_monitor(plan.model, plan.out, spec, export_score_graph(model, contract))
+    return FitResult(spec, int(len(train)), record)
