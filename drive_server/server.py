@@ -55,7 +55,8 @@ SESSION_LOG_INTERVAL_S, SESSION_LOG_BURST = 10.0, 20  # connect/disconnect lines
 SPARE_SLOTS = 64
 #: engine.io's async backend; its patches of library internals are ``drive_server.patches.BACKENDS[ASYNC_MODE]``.
 ASYNC_MODE = "eventlet"
-#: Bad-input kind of a ``ProtocolError`` by the field its message starts with.
+#: Bad-input kind of a ``ProtocolError`` by the field it names (``exc.field``; the wording of its message is for
+#: people and may change); any other field is a bad ``payload``.
 _INPUT_KINDS = {"image": "image", "speed": "number", "steering_angle": "number", "throttle": "number"}
 
 
@@ -165,7 +166,7 @@ class DriveServer:
             self._reply(client, "steer", encode_steer(sent))
             t5 = perf_counter()
         except ProtocolError as exc:
-            self._fallback(client, _INPUT_KINDS.get(str(exc).split(":", 1)[0], "payload"), str(exc))
+            self._fallback(client, _INPUT_KINDS.get(exc.field, "payload"), str(exc))
             return
         except InferenceError as exc:
             self._fallback(client, "model_output", str(exc))

@@ -25,6 +25,14 @@ class BadValue(UserError, ValueError):
 class ProtocolError(BadValue):
     """A telemetry or steer message that does not follow the simulator's wire format.
 
-    The message always names the field and what was wrong with it, so a log line is enough
-    to diagnose a misbehaving simulator build.
+    The message names the field and what was wrong with it, so a log line is enough to diagnose a
+    misbehaving simulator build. ``field`` names it again for code (the wire's key: ``image``, ``speed``,
+    ``steering_angle``, ``throttle``, ...; ``""`` when the message as a whole is at fault), so the server
+    sorts faults by it, never by the wording of the message.
     """
+
+    field: str = ""
+
+    def __init__(self, message: str = "", hint: str | None = None, *, field: str = "") -> None:
+        super().__init__(message, hint)
+        self.field = field

@@ -32,15 +32,15 @@ def decode_jpeg(raw: bytes | bytearray | memoryview | np.ndarray, reduce: int = 
         raise ValueError(f"reduce must be 1, 2, 4 or 8, not {reduce}")
     data = raw.tobytes() if isinstance(raw, np.ndarray) else bytes(raw)  # bytes(bytes) is no copy
     if not data.startswith(IMAGE_MAGIC):
-        raise ProtocolError(f"{what}: not a JPEG (starts with {data[:4]!r}, {len(data)} bytes)")
+        raise ProtocolError(f"{what}: not a JPEG (starts with {data[:4]!r}, {len(data)} bytes)", field="image")
     require_size(data, FRAME_WIDTH, FRAME_HEIGHT, what)  # a decompression bomb is refused before decoding
     buf = np.frombuffer(data, np.uint8)
     bgr = cv2.imdecode(buf, _REDUCE_FLAGS[reduce])
     if bgr is None:
-        raise ProtocolError(f"{what}: corrupt JPEG ({buf.size} bytes)")
+        raise ProtocolError(f"{what}: corrupt JPEG ({buf.size} bytes)", field="image")
     if bgr.shape[:2] != (FRAME_HEIGHT // reduce, FRAME_WIDTH // reduce):
         raise ProtocolError(f"{what}: expected {FRAME_WIDTH}x{FRAME_HEIGHT}, "
-                            f"got {bgr.shape[1] * reduce}x{bgr.shape[0] * reduce}")
+                            f"got {bgr.shape[1] * reduce}x{bgr.shape[0] * reduce}", field="image")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
@@ -49,7 +49,7 @@ def decode_image(image_b64: str, reduce: int = 1) -> np.ndarray:
     try:
         raw = base64.b64decode(image_b64, validate=False)
     except (binascii.Error, ValueError) as exc:
-        raise ProtocolError(f"image: invalid base64 ({exc})") from None
+        raise ProtocolError(f"image: invalid base64 ({exc})", field="image") from None
     return decode_jpeg(raw, reduce)
 
 
@@ -62,7 +62,7 @@ def encode_jpeg(rgb: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     """JPEG bytes of an RGB frame (quality 75, like Unity's ``EncodeToJPG``)."""
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:
-        raise ProtocolError("image: JPEG encoding failed")
+        raise ProtocolError("image: JPEG encoding failed", field="image")
     return buf.tobytes()
 
 

@@ -27,15 +27,15 @@ def image_size(raw: bytes) -> tuple[int, int]:
     """
     if raw.startswith(_PNG_MAGIC):
         if len(raw) < 24 or raw[12:16] != b"IHDR":
-            raise ProtocolError("image: PNG header cut short or without IHDR")
+            raise ProtocolError("image: PNG header cut short or without IHDR", field="image")
         width, height = struct.unpack_from(">II", raw, 16)
         return width, height
     if not raw.startswith(b"\xff\xd8"):
-        raise ProtocolError(f"image: not a JPEG (starts with {raw[:4]!r})")
+        raise ProtocolError(f"image: not a JPEG (starts with {raw[:4]!r})", field="image")
     pos, n = 2, len(raw)
     while pos + 4 <= n:
         if raw[pos] != 0xFF:
-            raise ProtocolError(f"image: corrupt JPEG header (no marker at byte {pos})")
+            raise ProtocolError(f"image: corrupt JPEG header (no marker at byte {pos})", field="image")
         marker = raw[pos + 1]
         if marker == 0xFF:  # fill byte before a marker
             pos += 1
@@ -47,14 +47,15 @@ def image_size(raw: bytes) -> tuple[int, int]:
             break
         (length,) = struct.unpack_from(">H", raw, pos + 2)
         if length < 2:
-            raise ProtocolError(f"image: corrupt JPEG header (segment length {length} at byte {pos})")
+            raise ProtocolError(f"image: corrupt JPEG header (segment length {length} at byte {pos})",
+                                field="image")
         if marker in _SOF_MARKERS:
             if pos + 9 > n:
                 break
             height, width = struct.unpack_from(">HH", raw, pos + 5)
             return width, height
         pos += 2 + length
-    raise ProtocolError(f"image: JPEG without a frame header ({n} bytes)")
+    raise ProtocolError(f"image: JPEG without a frame header ({n} bytes)", field="image")
 
 
 def require_size(raw: bytes, width: int, height: int, what: str = "image") -> None:
@@ -62,6 +63,7 @@ def require_size(raw: bytes, width: int, height: int, what: str = "image") -> No
     try:
         w, h = image_size(raw)
     except ProtocolError as exc:
-        raise ProtocolError(str(exc).replace("image:", f"{what}:", 1)) from None
+        raise ProtocolError(str(exc).replace("image:", f"{what}:", 1), field=exc.field) from None
     if (w, h) != (width, height):
-        raise ProtocolError(f"{what}: expected {width}x{height}, got {w}x{h} (refused before decoding)")
+        raise ProtocolError(f"{what}: expected {width}x{height}, got {w}x{h} (refused before decoding)",
+                            field="image")

@@ -43,30 +43,30 @@ def parse_number(value: Any, field: str) -> float:
     """
     low, high = (0.0, 1000.0) if field == "speed" else (-1e6, 1e6)
     if isinstance(value, bool):
-        raise ProtocolError(f"{field}: expected a number, got a boolean")
+        raise ProtocolError(f"{field}: expected a number, got a boolean", field=field)
     if isinstance(value, int):
         if not low <= value <= high:  # compared as int: a 400-digit integer never reaches float()
-            raise ProtocolError(f"{field}: {str(value)[:20]}... is outside [{low:g}, {high:g}]")
+            raise ProtocolError(f"{field}: {str(value)[:20]}... is outside [{low:g}, {high:g}]", field=field)
         number = float(value)
     elif isinstance(value, float):
         number = value
     elif isinstance(value, str):
         text = value.strip()
         if len(text) > 64:
-            raise ProtocolError(f"{field}: number too long ({len(text)} characters)")
+            raise ProtocolError(f"{field}: number too long ({len(text)} characters)", field=field)
         if "," in text:
             if "." in text:
-                raise ProtocolError(f"{field}: ambiguous number {value!r} (both ',' and '.')")
+                raise ProtocolError(f"{field}: ambiguous number {value!r} (both ',' and '.')", field=field)
             text = text.replace(",", ".")
         if not re.fullmatch(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?", text):
-            raise ProtocolError(f"{field}: not a number: {value[:40]!r}")
+            raise ProtocolError(f"{field}: not a number: {value[:40]!r}", field=field)
         number = float(text)
     else:
-        raise ProtocolError(f"{field}: expected a number or a string, got {type(value).__name__}")
+        raise ProtocolError(f"{field}: expected a number or a string, got {type(value).__name__}", field=field)
     if not math.isfinite(number):
-        raise ProtocolError(f"{field}: not finite: {value!r}")
+        raise ProtocolError(f"{field}: not finite: {value!r}", field=field)
     if not low <= number <= high:
-        raise ProtocolError(f"{field}: {number:g} is outside [{low:g}, {high:g}]")
+        raise ProtocolError(f"{field}: {number:g} is outside [{low:g}, {high:g}]", field=field)
     return number
 
 
@@ -75,13 +75,13 @@ def parse_telemetry(payload: Any) -> Telemetry | None:
     if payload is None:
         return None
     if not isinstance(payload, dict):
-        raise ProtocolError(f"telemetry: expected a JSON object, got {type(payload).__name__}")
+        raise ProtocolError(f"telemetry: expected a JSON object, got {type(payload).__name__}", field="telemetry")
     missing = [k for k in ("steering_angle", "throttle", "speed", "image") if k not in payload]
     if missing:
-        raise ProtocolError(f"telemetry: missing field(s) {', '.join(missing)}")
+        raise ProtocolError(f"telemetry: missing field(s) {', '.join(missing)}", field="telemetry")
     image = payload["image"]
     if not isinstance(image, str) or not image:
-        raise ProtocolError("image: expected a non-empty base64 string")
+        raise ProtocolError("image: expected a non-empty base64 string", field="image")
     return Telemetry(
         steering_angle_deg=parse_number(payload["steering_angle"], "steering_angle"),
         throttle=parse_number(payload["throttle"], "throttle"),
@@ -100,7 +100,7 @@ def encode_steer(command: SteerCommand) -> dict[str, str]:
     """The ``steer`` payload: both values as strings with a '.' decimal point, clamped to -1..1."""
     for name, v in (("steering", command.steering), ("throttle", command.throttle)):
         if not math.isfinite(v):
-            raise ProtocolError(f"{name}: refusing to send a non-finite value {v!r}")
+            raise ProtocolError(f"{name}: refusing to send a non-finite value {v!r}", field=name)
     steering = min(1.0, max(-1.0, command.steering))
     throttle = min(1.0, max(-1.0, command.throttle))
     return {"steering_angle": _fmt(steering, 6), "throttle": _fmt(throttle, 6)}
@@ -109,12 +109,12 @@ def encode_steer(command: SteerCommand) -> dict[str, str]:
 def parse_steer(payload: Any) -> SteerCommand:
     """Parse a ``steer`` payload (what a simulator client receives)."""
     if not isinstance(payload, dict):
-        raise ProtocolError(f"steer: expected a JSON object, got {type(payload).__name__}")
+        raise ProtocolError(f"steer: expected a JSON object, got {type(payload).__name__}", field="steer")
     for key in ("steering_angle", "throttle"):
         if key not in payload:
-            raise ProtocolError(f"steer: missing field {key}")
+            raise ProtocolError(f"steer: missing field {key}", field=key)
         if not isinstance(payload[key], str):
-            raise ProtocolError(f"steer: {key} must be a JSON string (the simulator stalls on numbers)")
+            raise ProtocolError(f"steer: {key} must be a JSON string (the simulator stalls on numbers)", field=key)
     return SteerCommand(
         steering=parse_number(payload["steering_angle"], "steering_angle"),
         throttle=parse_number(payload["throttle"], "throttle"),

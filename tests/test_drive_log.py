@@ -237,3 +237,46 @@ def test_drive_log_drives_the_rows_asked_for_or_those_a_run_held_out(tmp_path: P
         assert mask[first:last + 1].all() and last - first == 2 * (len(block) - 1)
     assert mask.sum() == sum(2 * len(b) - 1 for b in np.split(val, np.flatnonzero(np.diff(val) != 1) + 1))
     assert main(["drive-log", *common, "--rows", "900-950"]) == 2
+
+
+def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rbc drive-log: error") and "\n" not in err and "Traceback" not in err
+    return err
+
+
+def test_bad_rows_or_run_folders_are_one_line_with_a_hint(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 51: rows.py raised bare ValueErrors and the command turned every ValueError into a line without a hint;
+    a run folder whose config.json held no object was a traceback."""
+    common = ["drive-log", "--data", str(SAMPLE), "--baseline", "zero"]
+    assert main([*common, "--rows", ","]) == 2
+    assert "hint: give 1-based ranges FIRST-LAST" in _one_line(capsys)
+    run = tmp_path / "run"
+    run.mkdir()
+    for stored in ("not json", json.dumps({"other": 1}), json.dumps({"config": [1, 2]})):
+        (run / "config.json").write_text(stored)
+        assert main([*common, "--held-out-of", str(run)]) == 2
+        assert "not a training run's config" in _one_line(capsys)
+
+
+def test_a_bug_under_drive_log_keeps_its_traceback(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 51: the command caught every ValueError, so a bug inside the row choice read as bad input (exit 2)."""
+    import tools.drivelog.rows as rows
+
+    def broken(samples: object, ranges: object) -> np.ndarray:
+        raise ValueError("operands could not be broadcast together")  # as numpy says it: a bug, not the user's
+
+    monkeypatch.setattr(rows, "rows_mask", broken)
+    with pytest.raises(ValueError, match="broadcast"):
+        main(["drive-log", "--data", str(SAMPLE), "--baseline", "zero", "--rows", "1-5"])
+
+
+def test_the_drive_log_library_refuses_bad_input_as_user_errors() -> None:
+    from protocol.errors import UserError
+    from tools.drivelog.drivers import make_driver
+    from tools.drivelog.rows import parse_row_ranges
+
+    with pytest.raises(UserError, match="no range"):
+        parse_row_ranges(" , ")
+    with pytest.raises(UserError, match="unknown baseline 'left'"):
+        make_driver(None, None, "left")  # type: ignore[arg-type]

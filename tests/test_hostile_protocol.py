@@ -96,3 +96,57 @@ def test_a_huge_json_integer_in_a_telemetry_is_a_protocol_error():
         parse_telemetry(payload)
     with pytest.raises(ProtocolError):
         parse_telemetry(dict(payload, speed=0, steering_angle=-(10 ** 400)))
+
+
+@pytest.mark.parametrize(("payload", "field"), [
+    ([], "telemetry"),
+    ({"steering_angle": "0", "throttle": "0", "speed": "0"}, "telemetry"),
+    ({"steering_angle": "0", "throttle": "0", "speed": "0", "image": ""}, "image"),
+    ({"steering_angle": "0", "throttle": "0", "speed": "abc", "image": "x"}, "speed"),
+    ({"steering_angle": "1,5.0", "throttle": "0", "speed": "0", "image": "x"}, "steering_angle"),
+    ({"steering_angle": "0", "throttle": True, "speed": "0", "image": "x"}, "throttle"),
+])
+def test_a_protocol_error_names_its_field_for_code(payload, field):
+    """Issue 51: the server sorted faults by the text before the first ':' of the message."""
+    with pytest.raises(ProtocolError) as caught:
+        parse_telemetry(payload)
+    assert caught.value.field == field
+
+
+@pytest.mark.parametrize("image", [b"GIF89a", b"\xff\xd8\xff\xe0\x00\x00\x00", tiny_jpeg(),
+                                   with_claimed_size(REAL_JPEG, 30000, 30000)])
+def test_an_unusable_image_names_the_image_field(image):
+    with pytest.raises(ProtocolError) as caught:
+        decode_image(base64.b64encode(image).decode())
+    assert caught.value.field == "image"
+
+
+class _Pipeline:
+    """Just what DriveServer asks of a pipeline before a frame gets as far as the model."""
+
+    model = None
+
+    def smoother(self):
+        return None
+
+    def client_monitor(self, sid):
+        return None
+
+
+@pytest.mark.parametrize(("field", "kind"), [("speed", "number"), ("throttle", "number"), ("image", "image"),
+                                             ("telemetry", "payload"), ("", "payload")])
+def test_the_server_counts_a_reworded_protocol_error_by_its_field(monkeypatch, field, kind):
+    """Issue 51: rewording a message changed the counters (the kind was the text before its first ':')."""
+    import drive_server.server as server_module
+    from drive_server.server import DriveServer, ServerConfig
+
+    def reworded(payload):
+        raise ProtocolError("could not read this frame: the value is garbled", field=field)
+
+    monkeypatch.setattr(server_module, "parse_telemetry", reworded)
+    server = DriveServer(_Pipeline(), ServerConfig())  # type: ignore[arg-type]
+    replies: list[tuple[str, dict[str, str]]] = []
+    monkeypatch.setattr(server, "_reply", lambda client, event, payload: replies.append((event, payload)))
+    server._on_telemetry("sid-1", {"anything": "at all"})
+    assert server.clients["sid-1"].stats.bad_input == {kind: 1}
+    assert [event for event, _ in replies] == ["steer"]  # answered all the same

@@ -138,13 +138,10 @@ def _chosen(args: argparse.Namespace, samples: list) -> tuple[np.ndarray | None,
 
     if args.rows is None and args.held_out_of is None:
         return None, None
-    try:
-        if args.rows is not None:
-            keep, what = rows_mask(samples, parse_row_ranges(args.rows)), f"rows {args.rows}"
-        else:
-            keep, what = held_out_mask(samples, args.held_out_of), f"held out of {args.held_out_of}"
-    except ValueError as exc:
-        raise CommandError(str(exc)) from None
+    if args.rows is not None:  # bad rows or a run folder without a config raise BadValue: one line, with a hint
+        keep, what = rows_mask(samples, parse_row_ranges(args.rows)), f"rows {args.rows}"
+    else:
+        keep, what = held_out_mask(samples, args.held_out_of), f"held out of {args.held_out_of}"
     if not keep.any():
         raise CommandError(f"{what}: no row of {args.data} is among them")
     stretches = int(np.sum(np.diff(np.r_[0, keep.astype(np.int8)]) == 1))

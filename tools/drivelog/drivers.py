@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from protocol.errors import BadValue
 from tools.drivelog.loop import Driver
 from tools.drivelog.path import RecordedDrive
 
@@ -43,7 +44,7 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
 
         name = "always 0"
     else:
-        raise ValueError(f"unknown baseline {baseline!r}")
+        raise BadValue(f"unknown baseline {baseline!r}", "give a model, or the baseline recorded or zero")
     if not bias:
         return base, name
 

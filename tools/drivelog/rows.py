@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from protocol.datalog import Sample
+from protocol.errors import BadValue
 from protocol.rows import RowRange, parse_rows, row_numbers
 from tools.drivelog.path import RecordedDrive
 from tools.drivelog.road import RoadEdges
@@ -24,7 +25,8 @@ def parse_row_ranges(text: str) -> list[RowRange]:
     """``"A-B[,C-D...]"`` (1-based, inclusive, as the manifest's rows) -> the ranges."""
     ranges = [parse_rows(part) for part in text.split(",") if part.strip()]
     if not ranges:
-        raise ValueError(f"rows {text!r}: give 1-based ranges FIRST-LAST, comma-separated, e.g. 1-500,900-1200")
+        raise BadValue(f"rows {text!r}: no range given", "give 1-based ranges FIRST-LAST, comma-separated, "
+                                                          "e.g. 1-500,900-1200")
     return [r for r in ranges if r is not None]
 
 
@@ -50,8 +52,11 @@ def held_out_mask(samples: Sequence[Sample], run_dir: Path) -> np.ndarray:
     path = Path(run_dir) / "config.json"
     try:
         stored = json.loads(path.read_text(encoding="utf-8"))["config"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise ValueError(f"{path}: not a training run's config ({exc})") from None
+        if not isinstance(stored, dict):
+            raise TypeError(f"its config is a JSON {type(stored).__name__}")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise BadValue(f"{path}: not a training run's config ({exc})",
+                       "give the folder rbc train wrote (it holds config.json)") from None
     config = TrainConfig.from_dict(stored, str(path))
     dataset, _, val = split_logs(config.data, config.seed, config.data_options())
     spans: dict[Path, list[tuple[int, int]]] = {}
@@ -74,7 +79,7 @@ def chosen_rows(drive: RecordedDrive, road: RoadEdges | None, keep: np.ndarray
         raise ValueError(f"keep: one flag per frame ({len(drive)}), got {keep.shape}")
     idx = np.flatnonzero(keep)
     if not len(idx):
-        raise ValueError("no frame of the recording is among the chosen rows")
+        raise BadValue("no frame of the recording is among the chosen rows")
     # a new stretch where a frame was left out before it or the recording's session changed
     new = np.r_[True, (np.diff(idx) != 1) | (drive.session[idx[1:]] != drive.session[idx[:-1]])]
     session = np.cumsum(new) - 1
