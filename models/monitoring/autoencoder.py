@@ -76,7 +76,7 @@ def train_autoencoder(frames: np.ndarray, contract: PreprocessContract, epochs: 
             loss.backward()
             opt.step()
             sched.step()
-            total, count = total + float(loss) * len(batch), count + len(batch)
+            total, count = total + loss.item() * len(batch), count + len(batch)
         if progress is not None:
             progress(epoch + 1, epochs, total / max(1, count))
     return model.eval()

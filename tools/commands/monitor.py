@@ -3,6 +3,9 @@
 ``fit`` trains a small autoencoder on nominal driving (SelfOracle's reconstruction error), sets its warning and
 alarm thresholds from OTHER nominal runs as quantiles for a target false-alarm rate, and writes the steering
 model's file with the monitor in its metadata (:mod:`models.monitoring`; served by :mod:`drive_server.monitor`).
+``eval`` measures it on the headless simulator: held-out nominal driving, perturbed runs and degraded models,
+the anchors' protocol and the deployment figures, ``act`` against ``warn``, and its cost
+(:mod:`tools.monitoreval`).
 """
 
 from __future__ import annotations
@@ -15,9 +18,11 @@ from tools.errors import CommandError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from models.monitoring.fit import FitPlan
+    from tools.monitoreval.bench import EvalPlan
 
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
-                                help="fit: train and calibrate a monitor and attach it to a model file")
+                                help="fit: train and calibrate a monitor and attach it to a model file; eval: measure "
+                                     "it on the headless simulator")
     fit = sub.add_parser("fit", formatter_class=parser.formatter_class, help="train, calibrate and attach a monitor",
                          description="train an autoencoder on the model's own input from nominal driving, set its "
                                      "thresholds on other nominal runs, write MODEL with the monitor as OUT")
@@ -37,8 +42,64 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fit.add_argument("--alarms-per-hour", type=float, default=FitPlan.alarms_per_hour,
                      help="target alarms per hour of nominal driving (default %(default)s)")
 
+    ev = sub.add_parser("eval", formatter_class=parser.formatter_class, help="measure a monitor (a benchmark)",
+                        description="drive held-out nominal runs, perturbed runs and degraded models with the monitor "
+                                    "in warn and act; write OUT/monitor_eval.json and .md (resumes from OUT)")
+    ev.add_argument("model", type=Path, help="an ONNX steering model carrying a monitor")
+    ev.add_argument("--out", type=Path, required=True, help="folder for the journal, the record and the tables")
+    ev.add_argument("--nominal", type=int, default=EvalPlan.nominal,
+                    help="held-out nominal runs, one lap each (default %(default)s: about 3 simulated hours)")
+    ev.add_argument("--per-setting", type=int, default=EvalPlan.per_setting,
+                    help="runs per perturbation intensity and per degraded model (default %(default)s)")
+    ev.add_argument("--no-act", dest="act", action="store_false", help="skip the closed-loop runs with act")
+    ev.add_argument("--cost-log", type=Path, default=None, metavar="DIR",
+                    help="recorded frames to time the server's pipeline on, monitor off and on (default: the "
+                         "bundled test recording when present)")
+
 
 def run(args: argparse.Namespace) -> int:
+    if args.action == "eval":
+        return _eval(args)
+    return _fit(args)
+
+
+def _eval(args: argparse.Namespace) -> int:
+    import sys
+
+    from tools.console import Progress, interactive
+    from tools.monitoreval.bench import TABLES, EvalPlan, evaluate
+
+    if not args.model.is_file():
+        raise CommandError(f"no model at {args.model}")
+    if args.nominal < 1 or args.per_setting < 1:
+        raise CommandError("--nominal and --per-setting must be >= 1")
+    cost_log = args.cost_log
+    if cost_log is None:
+        sample = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
+        cost_log = sample if sample.is_dir() else None
+    plan = EvalPlan(args.model, args.out, nominal=args.nominal, per_setting=args.per_setting, act=args.act,
+                    cost_log=cost_log)
+    import logging
+
+    if not logging.getLogger().isEnabledFor(logging.DEBUG):  # hundreds of runs: their state changes only with -v
+        logging.getLogger("drive_server.monitor").setLevel(logging.ERROR)
+    bar = Progress("runs", "run")
+
+    def progress(done: int, total: int, what: str) -> None:
+        if interactive():
+            bar(done, total)
+        else:
+            print(f"run {done} of {total}: {what}", file=sys.stderr, flush=True)
+
+    try:
+        evaluate(plan, progress=progress)
+    finally:
+        bar.close()
+    print((args.out / TABLES).read_text(encoding="utf-8"))
+    return 0
+
+
+def _fit(args: argparse.Namespace) -> int:
     from models.monitoring.fit import FitPlan, fit_monitor
 
     if args.out.suffix != ".onnx":

@@ -19,7 +19,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -27,6 +27,11 @@ from protocol import SpeedUnit, SteerCommand, Telemetry, encode_steer, parse_ste
 from protocol.facts import COLLECT_SPEED_KMH, DEPLOY_SPEED_KMH, MAX_STEERING_DEG
 from tools.sim.track.road import Track
 from tools.sim.vehicle.kinematic import VehicleParams, VehicleState
+
+if TYPE_CHECKING:
+    from drive_server.monitor import MonitorPolicy, MonitorReading
+    from tools.sim.driving.autopilot import Autopilot
+    from tools.wire.unity_client import UnityWireClient
 
 log = logging.getLogger(__name__)
 
@@ -121,8 +126,10 @@ class OnnxDriver(LocalDriver):
 
     def __init__(self, model_path: str | Path, speed_limit_kmh: float = DEPLOY_SPEED_KMH,
                  steer_limit_deg: float = MAX_STEERING_DEG,
-                 tau: float = 1.0, speed_unit: SpeedUnit | str = SpeedUnit.MPH, threads: int = 1) -> None:
+                 tau: float = 1.0, speed_unit: SpeedUnit | str = SpeedUnit.MPH, threads: int = 1,
+                 monitor: MonitorPolicy | None = None) -> None:
         from drive_server.model import InferenceConfig, SteeringModel
+        from drive_server.monitor import MonitorMode, MonitorPolicy
         from drive_server.pipeline import DriveConfig, DrivePipeline
 
         super().__init__()
@@ -130,12 +137,22 @@ class OnnxDriver(LocalDriver):
         model.warm_up()
         self.pipeline = DrivePipeline(model, DriveConfig(speed_limit_kmh=speed_limit_kmh,
                                                          steer_limit_deg=steer_limit_deg, tau=tau,
-                                                         speed_unit=SpeedUnit(speed_unit)))
+                                                         speed_unit=SpeedUnit(speed_unit),
+                                                         monitor=monitor or MonitorPolicy(mode=MonitorMode.OFF)))
         self.smoother = self.pipeline.smoother()  # one driver is one client: smoothed as the model asks
+        self.monitor = self.pipeline.client_monitor()  # None: no monitor in the file, or off
+        self.readings: list[tuple[float, MonitorReading | None]] = []  # (frame time, reading) with a monitor
         self.name = f"onnx:{Path(model_path).name}"
 
+    def start(self, scene: Scene) -> None:
+        super().start(scene)
+        self.monitor = self.pipeline.client_monitor()  # each run's monitor starts afresh
+        self.readings = []
+
     def steer(self, frame: Frame) -> SteerCommand:
-        command, _ = self.pipeline.run(frame.telemetry(), self.smoother)
+        command, _ = self.pipeline.run(frame.telemetry(), self.smoother, self.monitor)
+        if self.monitor is not None:
+            self.readings.append((frame.t, self.monitor.last))
         return command
 
 
@@ -147,7 +164,7 @@ class AutopilotDriver(LocalDriver):
     def __init__(self, speed_kmh: float = COLLECT_SPEED_KMH, seed: int | None = None) -> None:
         super().__init__()
         self.speed_kmh, self.seed = speed_kmh, seed
-        self.autopilot = None
+        self.autopilot: Autopilot | None = None
         self._period = 0.0
 
     def start(self, scene: Scene) -> None:
@@ -177,7 +194,7 @@ class SocketDriver:
     def __init__(self, url: str = "http://127.0.0.1:4567", timeout: float = 10.0) -> None:
         self.url, self.timeout = url, timeout
         self.name = f"socket:{url}"
-        self._client = None
+        self._client: UnityWireClient | None = None
         self._sent: deque[float] = deque()
 
     def start(self, scene: Scene) -> None:

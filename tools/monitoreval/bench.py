@@ -1,0 +1,64 @@
+"""``rbc monitor eval``'s work: drive the run set, score the monitor, compare ``act`` with ``warn``, time it, and
+write the record (seed, plan, code version) and its tables, each through a temporary file."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drive_server.runrecords import code_version, write_json, write_text
+from protocol.errors import BadValue
+from tools.monitoreval.runset import RunSpec, failing_runs, nominal_runs
+from tools.monitoreval.scoring import ScoringRules
+
+RECORD = "monitor_eval.json"
+TABLES = "monitor_eval.md"
+
+
+@dataclass(frozen=True)
+class EvalPlan:
+    """What to measure; the defaults are defined here once (``rbc monitor eval``'s flags read them)."""
+
+    model: Path
+    out: Path
+    nominal: int = 90  # held-out nominal runs of one lap (about 2 min each: 3 h)
+    per_setting: int = 6  # runs of each perturbation intensity and each degraded model
+    act: bool = True  # also drive every run with --monitor act
+    cost_log: Path | None = None  # recorded frames to time the server's pipeline on
+    rules: ScoringRules = field(default_factory=ScoringRules)
+
+    def specs(self) -> list[RunSpec]:
+        return nominal_runs(self.nominal) + failing_runs(self.per_setting)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
+
+
+def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
+    from drive_server.model import SteeringModel
+    from tools.monitoreval.cost import monitor_cost
+    from tools.monitoreval.report import closed_loop, figures, tables
+    from tools.monitoreval.runner import drive_all, file_digest
+
+    found = SteeringModel(plan.model).monitor()
+    if found is None:
+        raise BadValue(f"{plan.model.name} carries no monitor (attach one with rbc monitor fit)")
+    spec = found[0]
+    modes = ("warn", "act") if plan.act else ("warn",)
+    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress)
+    record: dict[str, Any] = {
+        "model": plan.model.name, "model_sha256": file_digest(plan.model),
+        "monitor": {"score": spec.score, "warn": spec.warn, "alarm": spec.alarm, "window": spec.window,
+                    "calibration": spec.calibration},
+        "plan": plan.to_dict(), "code_version": code_version(),
+        "runs": {"total": len(results), "nominal": plan.nominal, "per_setting": plan.per_setting},
+        "figures": figures(results, plan.rules),
+        "closed_loop": closed_loop(results) if plan.act else {},
+        "cost": monitor_cost(plan.model, plan.cost_log) if plan.cost_log is not None else None,
+    }
+    write_json(plan.out / RECORD, record)
+    write_text(plan.out / TABLES, tables(record))
+    return record

@@ -1,0 +1,127 @@
+"""The benchmark's record and tables: the anchors' protocol beside the published figures, the deployment
+figures, the closed loop (``act`` against ``warn``, which drives exactly like ``off``) and the cost."""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from tools.monitoreval.runset import RunSpec
+from tools.monitoreval.scoring import MISBEHAVIOUR_CAUSES, RunTrace, ScoringRules, score
+
+#: Published figures (recall at the 1, 2, 3 s slices; F3), Grewal, Tonella & Stocco, ICST 2024, Table 3.
+ANCHORS = [
+    {"monitor": "deep ensemble, 5 models", "recall_1": 1.00, "recall_2": 1.00, "recall_3": 0.98, "f3": None},
+    {"monitor": "MC-dropout", "recall_1": 0.97, "recall_2": 0.96, "recall_3": 0.93, "f3": None},
+    {"monitor": "SelfOracle (autoencoder)", "recall_1": 0.87, "recall_2": 0.77, "recall_3": 0.66, "f3": None},
+    {"monitor": "ThirdEye (attention)", "recall_1": 0.78, "recall_2": 0.79, "recall_3": 0.71, "f3": None},
+    {"monitor": "best of the study (50-model ensemble)", "recall_1": None, "recall_2": None, "recall_3": None,
+     "f3": 0.94},
+]
+
+
+def trace(spec: RunSpec, run: dict[str, Any]) -> RunTrace:
+    return RunTrace(spec.name, spec.group, np.asarray(run["t"], dtype=np.float64),
+                    np.frombuffer(run["level"].encode(), dtype=np.uint8) - ord("0"),
+                    [(float(t), str(c)) for t, c in run["takeovers"]], float(run["sim_time_s"]),
+                    {"axis": spec.axis, "intensity": spec.intensity})
+
+
+def _count(runs: Sequence[dict[str, Any]], causes: Sequence[str]) -> int:
+    return sum(1 for r in runs for _, c in r["takeovers"] if c in causes)
+
+
+def closed_loop(results: Sequence[tuple[RunSpec, str, dict[str, Any]]]) -> dict[str, Any]:
+    """``act`` against ``warn`` on the same runs: failures prevented, and the price on nominal driving."""
+    by = {(s.name, m): r for s, m, r in results}
+    specs = {s.name: s for s, _, _ in results}
+    failing = [n for n, s in specs.items() if s.group != "nominal" and (n, "act") in by and (n, "warn") in by]
+    nominal = [n for n, s in specs.items() if s.group == "nominal" and (n, "act") in by and (n, "warn") in by]
+    if not failing and not nominal:
+        return {}
+    off_fail = _count([by[(n, "warn")] for n in failing], MISBEHAVIOUR_CAUSES)
+    act_fail = _count([by[(n, "act")] for n in failing], MISBEHAVIOUR_CAUSES)
+    other = ("stuck", "wrong_way")
+
+    def mean(key: str, mode: str) -> float | None:
+        values = [by[(n, mode)][key] for n in nominal if by[(n, mode)][key] is not None]
+        return statistics.fmean(values) if values else None
+
+    out = {"failing_runs": len(failing), "misbehaviours_off": off_fail, "misbehaviours_act": act_fail,
+           "prevented": (1 - act_fail / off_fail) if off_fail else None,
+           "stuck_or_wrong_way_off": _count([by[(n, "warn")] for n in failing], other),
+           "stuck_or_wrong_way_act": _count([by[(n, "act")] for n in failing], other),
+           "nominal_runs": len(nominal)}
+    for key in ("eta", "lap_time_s", "mean_speed_kmh"):
+        off, act = mean(key, "warn"), mean(key, "act")
+        out[f"nominal_{key}_off"], out[f"nominal_{key}_act"] = off, act
+        out[f"nominal_{key}_change"] = (act - off) / off if off and act is not None else None
+    return out
+
+
+def figures(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules) -> dict[str, Any]:
+    """The monitor's figures on the ``warn`` runs (which drive exactly as without a monitor)."""
+    traces = [trace(s, r) for s, m, r in results if m == "warn"]
+    by_axis: dict[str, Any] = {}
+    for axis in sorted({t.meta["axis"] for t in traces if t.group != "nominal"}):
+        part = [t for t in traces if t.group == "nominal" or t.meta["axis"] == axis]
+        f = score(part, rules)
+        by_axis[axis] = {"misbehaviours": f.misbehaviours, "recall_1": f.recall_at["1"],
+                         "recall_3": f.recall_at["3"], "lead_median_s": f.lead_median_s}
+    return {"all": score(traces, rules).to_dict(), "by_axis": by_axis,
+            "failed_monitors": sum(1 for _, m, r in results if r.get("monitor_failed"))}
+
+
+def _pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.1f} %"
+
+
+def tables(record: dict[str, Any]) -> str:
+    f = record["figures"]["all"]
+    lines = ["### Like for like: the anchors' protocol (one-second slices, nominal windows as negatives)", "",
+             "| monitor | recall 1 s | recall 2 s | recall 3 s | recall 4-6 s | F3 1-3 s |",
+             "|---|---|---|---|---|---|",
+             f"| ours: {record['monitor']['score']} | {_pct(f['recall_at']['1'])} | {_pct(f['recall_at']['2'])} | "
+             f"{_pct(f['recall_at']['3'])} | {_pct(f['recall_4_6'])} | {f['f3_1_3']:.3f} |"]
+    for a in ANCHORS:
+        lines.append(f"| {a['monitor']} (published) | {_pct(a['recall_1'])} | {_pct(a['recall_2'])} | "
+                     f"{_pct(a['recall_3'])} | - | {a['f3'] if a['f3'] is not None else '-'} |")
+    lead, p10 = f["lead_median_s"], f["lead_p10_s"]
+    lines += ["", f"{f['misbehaviours']} misbehaviours ({f['undetectable']['3']} with too little history for the 3 s "
+              f"slice, counted as misses); {f['nominal_windows']:,} nominal one-second windows, "
+              f"{f['false_windows']} with a warning.", "",
+              "### For deployment: episodes, lead and false alarms", "",
+              "| figure | value |", "|---|---|",
+              f"| recall with a lead of at least 1 / 2 / 3 s | {_pct(f['lead_recall_at']['1'])} / "
+              f"{_pct(f['lead_recall_at']['2'])} / {_pct(f['lead_recall_at']['3'])} |",
+              f"| precision of episodes (followed by a misbehaviour within 10 s) | {_pct(f['lead_precision'])} |",
+              f"| median / p10 lead of the first episode | "
+              f"{'-' if lead is None else f'{lead:.1f} s'} / "
+              f"{'-' if p10 is None else f'{p10:.1f} s'} |",
+              f"| false episodes per hour of held-out nominal driving (95 % bound) | {f['false_per_hour']:.2f} "
+              f"({f['false_per_hour_upper95']:.2f}) over {f['nominal_hours']:.2f} h |"]
+    c = record.get("closed_loop") or {}
+    if c:
+        lines += ["", "### Closed loop: `--monitor act` against `warn` (which drives exactly like `off`)", "",
+                  "| figure | warn | act |", "|---|---|---|",
+                  f"| misbehaviours on the {c['failing_runs']} failing runs | {c['misbehaviours_off']} | "
+                  f"{c['misbehaviours_act']} ({_pct(c['prevented'])} prevented) |",
+                  f"| stuck or wrong-way take-overs there | {c['stuck_or_wrong_way_off']} | "
+                  f"{c['stuck_or_wrong_way_act']} |"]
+        for key, label, unit in (("eta", "degree of autonomy, nominal", " %"), ("lap_time_s", "lap time, nominal",
+                                 " s"), ("mean_speed_kmh", "mean speed, nominal", " km/h")):
+            off, act, ch = c[f"nominal_{key}_off"], c[f"nominal_{key}_act"], c[f"nominal_{key}_change"]
+            if off is not None and act is not None:
+                change = f" ({100 * ch:+.1f} %)" if ch is not None else ""
+                lines.append(f"| {label} ({c['nominal_runs']} runs) | {off:.2f}{unit} | {act:.2f}{unit}{change} |")
+    cost = record.get("cost")
+    if cost:
+        lines += ["", "### Cost: drive_server's pipeline per frame, monitor off and on in one run", "",
+                  "| | p50 | p99 |", "|---|---|---|",
+                  f"| monitor off | {cost['off']['p50_ms']:.3f} ms | {cost['off']['p99_ms']:.3f} ms |",
+                  f"| monitor on (act) | {cost['on']['p50_ms']:.3f} ms | {cost['on']['p99_ms']:.3f} ms |",
+                  f"| added | {cost['added']['p50_ms']:.3f} ms | {cost['added']['p99_ms']:.3f} ms |"]
+    return "\n".join(lines) + "\n"

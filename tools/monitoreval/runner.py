@@ -1,0 +1,142 @@
+"""Drive the benchmark's runs with the monitored model in-process (drive_server's own pipeline, the monitor in
+``warn`` or ``act``), one journal line per finished run so an interrupted benchmark resumes where it stopped and
+a resumed one equals a clean one. Each line is keyed on everything its result depends on: the run, the mode, the
+model file's content, and the version of the code that drives and scores it (derived from its imports)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from protocol.codeversion import code_digest
+from protocol.errors import BadValue
+from tools.monitoreval.runset import RunSpec
+
+log = logging.getLogger(__name__)
+
+JOURNAL = "runs.jsonl"
+#: The modules whose code a run's result depends on (their imports are followed).
+RUN_CODE = ("tools.monitoreval.runner", "tools.sim.driving.session", "tools.sim.driving.drivers",
+            "drive_server.pipeline")
+
+
+def file_digest(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+def degraded_model(src: Path, folder: Path, sigma: float, seed: int = 0) -> Path:
+    """``src`` with Gaussian noise on every weight tensor (sigma times the tensor's std), its metadata and monitor
+    kept: a model that drives worse on the same frames. Cached in ``folder`` by source content, sigma and seed."""
+    import onnx
+    from onnx import numpy_helper
+
+    from drive_server.runrecords import atomic_path
+
+    dst = Path(folder) / f"{Path(src).stem}-noise{sigma:g}-s{seed}-{file_digest(src)}.onnx"
+    if dst.is_file():
+        return dst
+    rng = np.random.default_rng(seed)
+    proto = onnx.load(str(src))
+    for tensor in proto.graph.initializer:
+        w = numpy_helper.to_array(tensor)
+        if w.dtype != np.float32 or w.size < 2:
+            continue
+        noisy = (w + rng.normal(0.0, sigma * float(w.std()), w.shape)).astype(np.float32)
+        tensor.CopyFrom(numpy_helper.from_array(noisy, tensor.name))
+    with atomic_path(dst) as tmp:
+        onnx.save(proto, str(tmp))
+    return dst
+
+
+@dataclass(frozen=True)
+class RunKey:
+    spec: RunSpec
+    mode: str
+    model: str  # content digest of the file driven (the degraded copy for a degraded run)
+    code: str
+
+    def text(self) -> str:
+        return json.dumps({"spec": self.spec.to_dict(), "mode": self.mode, "model": self.model, "code": self.code},
+                          sort_keys=True)
+
+
+def drive(spec: RunSpec, model: Path, mode: str) -> dict[str, Any]:
+    """One run: the per-frame monitor state and one-second mean, the take-overs, and the lap's figures."""
+    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from tools.sim.driving.drivers import OnnxDriver
+    from tools.sim.driving.model_rig import model_rig
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.driving.session import run_scenario
+
+    driver = OnnxDriver(model, monitor=MonitorPolicy(mode=MonitorMode(mode)))
+    if driver.monitor is None:
+        raise BadValue(f"{model.name} carries no monitor (attach one with rbc monitor fit)")
+    config = ScenarioConfig(track=spec.track, seed=spec.seed, light_intensity=spec.light_intensity,
+                            light_direction_deg=spec.light_direction_deg, yaw_offset_deg=spec.yaw_offset_deg,
+                            cones=spec.cones, cone_seed=spec.seed, camera=model_rig(model))
+    result = run_scenario(config, driver)
+    t = [round(when, 3) for when, _ in driver.readings]
+    level = "".join(str(int(r.level)) if r is not None else "0" for _, r in driver.readings)
+    mean = [round(r.mean, 6) if r is not None else None for _, r in driver.readings]
+    lap = result.laps[0] if result.laps else None
+    return {"t": t, "level": level, "mean": mean,
+            "takeovers": [[round(i.t, 3), str(i.cause)] for lap_ in result.laps for i in lap_.interventions],
+            "sim_time_s": result.sim_time_s, "eta": result.mean_eta, "completed": result.completed,
+            "lap_time_s": lap.lap_time_s if lap else None, "mean_speed_kmh": lap.mean_speed_kmh if lap else None,
+            "monitor_failed": driver.monitor.failed if driver.monitor is not None else None}
+
+
+class Journal:
+    """Finished runs by key; lines that no longer load are counted and reported, never silently dropped."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.done: dict[str, dict[str, Any]] = {}
+        if not path.is_file():
+            return
+        bad = 0
+        for line in path.read_text(encoding="utf-8").splitlines():
+            try:
+                entry = json.loads(line)
+                self.done[entry["key"]] = entry["run"]
+            except (ValueError, KeyError, TypeError):
+                bad += 1
+        if bad:
+            log.warning("%s: %d line(s) could not be read (a run cut off mid-write?); those runs are driven again",
+                        path, bad)
+
+    def add(self, key: str, run: dict[str, Any]) -> None:
+        self.done[key] = run
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("a", encoding="utf-8") as fh:
+            fh.write(json.dumps({"key": key, "run": run}) + "\n")
+
+
+def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Path,
+              progress: Callable[[int, int, str], None] | None = None) -> list[tuple[RunSpec, str, dict[str, Any]]]:
+    """Every spec in every mode, resuming from ``out``'s journal; (spec, mode, run) in a fixed order."""
+    journal = Journal(out / JOURNAL)
+    code = code_digest(*RUN_CODE)
+    models = out / "models"
+    results, total, done = [], len(specs) * len(modes), 0
+    for spec in specs:
+        path = degraded_model(model, models, spec.weight_noise, spec.seed) if spec.weight_noise else model
+        digest = file_digest(path)
+        for mode in modes:
+            key = RunKey(spec, mode, digest, code).text()
+            run = journal.done.get(key)
+            if run is None:
+                run = drive(spec, path, mode)
+                journal.add(key, run)
+            results.append((spec, mode, run))
+            done += 1
+            if progress is not None:
+                progress(done, total, f"{spec.name} ({mode})")
+    return results

@@ -1,0 +1,89 @@
+"""The benchmark's runs, as data: held-out nominal driving, the paper's robustness axes at graded intensities,
+unseen worlds, and degraded models. Nothing here is a calibration run: the monitor's thresholds come from
+``rbc monitor fit --calibration`` (other world seeds), and a test checks the two never share a world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+#: World seeds of the held-out nominal runs (training range, apart from the monitor's training 0-29 and
+#: calibration 200-229 worlds in the bundled model's recipe).
+NOMINAL_WORLDS = range(300, 400)
+#: Built-in tracks driven as nominal runs besides the worlds (several spawn seeds each).
+NOMINAL_TRACKS = ("lake", "mountain")
+#: World seeds of the evaluation range (never trained or calibrated on): the unseen-world runs.
+UNSEEN_WORLDS_FIRST = 1_000_000
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of the benchmark."""
+
+    name: str
+    group: str  # "nominal", "perturbed" or "degraded"
+    axis: str  # what is changed: "none", "light", "sun", "yaw", "cones", "unseen_world", "weight_noise"
+    intensity: float  # the axis's value (light factor, degrees, cones, noise sigma); 0 for none
+    track: str
+    seed: int = 0
+    light_intensity: float = 1.0
+    light_direction_deg: float = 0.0
+    yaw_offset_deg: float = 0.0
+    cones: int = 0
+    weight_noise: float = 0.0  # sigma of the steering weights' noise, relative to each tensor's std
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def nominal_runs(count: int) -> list[RunSpec]:
+    """``count`` held-out nominal runs: one lap each, generated worlds and built-in tracks in turn."""
+    out = []
+    for i in range(count):
+        if i % 5 == 4:
+            track = NOMINAL_TRACKS[(i // 5) % len(NOMINAL_TRACKS)]
+            out.append(RunSpec(f"nominal-{track}-{i}", "nominal", "none", 0.0, track, seed=i))
+        else:
+            seed = NOMINAL_WORLDS[i % len(NOMINAL_WORLDS)]
+            out.append(RunSpec(f"nominal-world{seed}-{i}", "nominal", "none", 0.0, f"world:{seed}", seed=i))
+    return out
+
+
+#: The perturbed axes and their graded intensities (the paper's robustness axes, Tables 9-10, pushed further).
+PERTURBATIONS: dict[str, tuple[float, ...]] = {
+    "light": (0.12, 0.18, 0.25, 4.0, 6.0),  # scene light intensity (1: nominal)
+    "sun": (120.0, 180.0),  # sun direction offset, degrees
+    "yaw": (25.0, 40.0, -25.0, -40.0),  # spawn heading offset, degrees
+    "cones": (10.0, 20.0),  # traffic cones on the road (this model was never taught to avoid them)
+    "unseen_world": (0.0,),  # a world of the evaluation seeds
+}
+#: Degraded steering models: Gaussian noise on every weight tensor, sigma relative to the tensor's std.
+WEIGHT_NOISE = (0.15, 0.3, 0.5)
+
+
+def failing_runs(per_setting: int) -> list[RunSpec]:
+    """``per_setting`` runs of each perturbation and each degraded model, on worlds and tracks in turn."""
+    out = []
+    for axis, values in PERTURBATIONS.items():
+        for value in values:
+            for k in range(per_setting):
+                world = f"world:{NOMINAL_WORLDS[(k * 7) % len(NOMINAL_WORLDS)]}" if k % 2 else "lake"
+                base = dict(name=f"{axis}{value:g}-{k}", group="perturbed", axis=axis, intensity=value, track=world,
+                            seed=100 + k)
+                if axis == "light":
+                    out.append(RunSpec(**base, light_intensity=value))
+                elif axis == "sun":
+                    out.append(RunSpec(**base, light_direction_deg=value))
+                elif axis == "yaw":
+                    out.append(RunSpec(**base, yaw_offset_deg=value))
+                elif axis == "cones":
+                    out.append(RunSpec(**{**base, "track": "lake"}, cones=int(value)))
+                else:
+                    out.append(RunSpec(**{**base, "track": f"world:{UNSEEN_WORLDS_FIRST + k}"}))
+    for sigma in WEIGHT_NOISE:
+        for k in range(per_setting):
+            track = "lake" if k % 2 == 0 else f"world:{NOMINAL_WORLDS[(k * 11) % len(NOMINAL_WORLDS)]}"
+            out.append(RunSpec(f"noise{sigma:g}-{k}", "degraded", "weight_noise", sigma, track, seed=200 + k,
+                               weight_noise=sigma))
+    return out
