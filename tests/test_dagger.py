@@ -239,3 +239,19 @@ def test_the_perturbations_are_rbc_evals_table9_rows(clean, tmp_path):
     row = loop.round_row({"round": 0, "mode": "dagger", "beta": 1.0, "expert_frames": 60, "eval": scores,
                           "collection": {"learner_steps": 0, "takeovers": 0}})
     assert "orientation" in loop.rounds_table([row])
+
+
+def test_the_recorded_clock_runs_at_the_environments_control_rate(tmp_path, monkeypatch):
+    """Issue 51: the rollout advanced its clock by a hard-coded 15 Hz beside the environment's own control rate, so
+    an environment at another rate recorded overlapping episodes."""
+    import gymnasium
+
+    from protocol.stamps import frame_time
+
+    real_make = gymnasium.make
+    monkeypatch.setattr(gymnasium, "make", lambda *a, **k: real_make(*a, control_hz=30.0, **k))
+    config = _config(budgets=(20, 40), episode_steps=10)
+    rollout.collect_round(config, 0, tmp_path / "data", None)
+    times = [frame_time(row[0]) for row in _log(tmp_path / "data")]
+    assert np.diff(times[:10]) == pytest.approx(1 / 30, abs=2e-3)  # steps of one episode: the environment's rate
+    assert times[10] - times[0] == pytest.approx(10 / 30 + 10.0, abs=2e-3)  # the next episode after a 10 s pause

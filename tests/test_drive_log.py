@@ -280,3 +280,22 @@ def test_the_drive_log_library_refuses_bad_input_as_user_errors() -> None:
         parse_row_ranges(" , ")
     with pytest.raises(UserError, match="unknown baseline 'left'"):
         make_driver(None, None, "left")  # type: ignore[arg-type]
+
+
+def test_the_closed_loop_flags_are_one_declaration_in_both_commands() -> None:
+    """Issue 51: rbc drive-log and rbc data crossval declared --lane, --max-offset and --handback each on their own,
+    with two wordings and two defaults for the hand-back (6 and None)."""
+    import argparse
+
+    from tools.cli import BY_NAME, load, subcommand_parser
+    from tools.drivelog.loop import LoopRules
+
+    def flags(parser: argparse.ArgumentParser) -> dict[str, tuple[object, ...]]:
+        return {a.dest: (a.option_strings, a.default, a.choices, a.metavar, a.help, a.type)
+                for a in parser._actions if a.dest in ("lane", "max_offset", "handback")}
+
+    drive_log = subcommand_parser(BY_NAME["drive-log"], load(BY_NAME["drive-log"]))
+    data = subcommand_parser(BY_NAME["data"], load(BY_NAME["data"]))
+    crossval = next(a for a in data._actions if isinstance(a, argparse._SubParsersAction)).choices["crossval"]
+    assert flags(drive_log) == flags(crossval) and len(flags(drive_log)) == 3
+    assert crossval.parse_args(["--models", "m-{fold}.onnx"]).handback == LoopRules.handback_s

@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import base64
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -208,11 +209,24 @@ CAMERA_NUMBERS: dict[float, str | None] = {0.95: None, 6.2: None, 1.4: None, 60.
 #: Assignments of those numbers that mean something else, and why.
 CAMERA_COINCIDENCES = {
     ("tools/sim/vehicle/kinematic.py", "front_grip_factor"),  # a tyre grip balance (0.95 front / 1.05 rear)
+    ("tools/monitoreval/scoring.py", "confidence"),  # a Poisson bound's 95 % confidence
 }
 
 
 def _camera_number_assignments(path: Path) -> list[tuple[str, str, float]]:
     """(file, name, value) of every assignment, keyword argument or default that is one of the camera's numbers."""
+    def camera(name: str, value: float) -> bool:
+        if value not in CAMERA_NUMBERS or (type(value) is int and CAMERA_NUMBERS[value] is None):
+            return False
+        word = CAMERA_NUMBERS[value]
+        return word is None or word in name.lower()
+
+    return _number_assignments(path, camera)
+
+
+def _number_assignments(path: Path, counts: Callable[[str, float], bool]) -> list[tuple[str, str, float]]:
+    """(file, name, value) of every assignment, keyword argument or default of a literal number that ``counts``
+    (name, value)."""
     def number(node: ast.AST) -> float | None:
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
             node = node.operand
@@ -221,10 +235,7 @@ def _camera_number_assignments(path: Path) -> list[tuple[str, str, float]]:
 
     def named(name: str, node: ast.AST) -> list[tuple[str, str, float]]:
         value = number(node)
-        if value is None or value not in CAMERA_NUMBERS or (type(value) is int and CAMERA_NUMBERS[value] is None):
-            return []
-        word = CAMERA_NUMBERS[value]
-        return [(file, name, value)] if word is None or word in name.lower() else []
+        return [(file, name, value)] if value is not None and counts(name, value) else []
 
     file = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else path.name
 
@@ -265,6 +276,47 @@ def test_the_camera_check_finds_a_copied_number(tmp_path):
                       "def f(pitch=-6.2, rows=137):\n    return g(bonnet_row=137)\n")
     assert sorted((n, v) for _, n, v in _camera_number_assignments(copied)) == [
         ("SIDE", 0.95), ("bonnet_row", 137), ("pitch", 6.2), ("vfov_deg", 60.0)]
+
+
+#: The shared facts beside the camera's: a literal number, the words one of which a name must hold for it to count
+#: (25 is a common number, a steering angle or a speed of 25 is ours), and the one module that writes it.
+SHARED_FACTS: list[tuple[float, tuple[str, ...], str]] = [
+    (25.0, ("steer",), "protocol/facts.py"),  # MAX_STEERING_DEG: the wheel's largest angle
+    (25.0, ("speed", "kmh"), "protocol/facts.py"),  # DEPLOY_SPEED_KMH: the speed a model is deployed at
+    (6.0, ("intervention", "takeover", "handback"), "tools/sim/driving/rules.py"),  # Eq. 2's 6 s per take-over
+    (95.0, ("eta", "target"), "tools/sim/driving/rules.py"),  # TARGET_ETA: the degree of autonomy aimed at
+]
+
+
+def _fact_assignments(path: Path) -> list[tuple[str, str, float]]:
+    """(file, name, value) of every assignment, keyword argument or default that writes one of the shared facts."""
+    def fact(name: str, value: float) -> bool:
+        return any(value == v and any(w in name.lower() for w in words) for v, words, _ in SHARED_FACTS)
+
+    return _number_assignments(path, fact)
+
+
+def test_the_shared_facts_live_in_one_module_each():
+    """Issue 51: 25 degrees, 25 km/h, the 6 s a take-over costs and the 95 % target were written again in the
+    closed loop on recordings, DAgger's settings and the cross-validation; now each has one home."""
+    homes = {file for _, _, file in SHARED_FACTS}
+    where: dict[str, list[str]] = {}
+    for path in MODULES.values():
+        for file, name, value in _fact_assignments(path):
+            where.setdefault(file, []).append(f"{name} = {value}")
+    assert set(where) == homes, {f: w for f, w in where.items() if f not in homes}
+    assert sorted(where["protocol/facts.py"]) == ["DEPLOY_SPEED_KMH = 25.0", "MAX_STEERING_DEG = 25.0"]
+    assert sorted(where["tools/sim/driving/rules.py"]) == ["TARGET_ETA = 95.0", "seconds_per_intervention = 6.0"]
+
+
+def test_the_facts_check_finds_a_copied_fact(tmp_path):
+    copied = tmp_path / "copied.py"
+    copied.write_text("MAX_STEER_DEG = 25.0\nBARRIER_M = 25.0\nTIMEOUT_S = 6.0\nclass Rules:\n"
+                      "    speed_limit_kmh: float = 25.0\n    handback_s: float = 6\n\n"
+                      "def f(target=95.0, quantile=95.0):\n    return g(seconds_per_intervention=6.0)\n")
+    assert sorted((n, v) for _, n, v in _fact_assignments(copied)) == [
+        ("MAX_STEER_DEG", 25.0), ("handback_s", 6), ("seconds_per_intervention", 6.0), ("speed_limit_kmh", 25.0),
+        ("target", 95.0)]
 
 
 def test_the_pinhole_maths_is_protocol_cameras():

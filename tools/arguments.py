@@ -37,6 +37,24 @@ def add_smooth_argument(parser: argparse.ArgumentParser) -> None:
                              "what the model's metadata asks for, as drive_server; off for a model without)")
 
 
+def add_loop_rule_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--lane``, ``--max-offset``, ``--handback``: when a person takes over in the closed loop on a recording
+    (``rbc drive-log``, ``rbc data crossval``) and how long they drive; defaults and ranges are ``LoopRules``'."""
+    from tools.drivelog.loop import LoopRules
+
+    parser.add_argument("--lane", choices=("road", "path"), default=LoopRules.lane,
+                        help="closed loop: road: a person takes over when the car's side passes an edge line of the "
+                             "road, found in each recorded frame; path: when the car is --max-offset from the "
+                             "driver's own line (DAVE-2) (default %(default)s)")
+    parser.add_argument("--max-offset", type=float, default=LoopRules.max_offset_m, metavar="M",
+                        help="with --lane path: metres off the driver's line at which a person takes over (DAVE-2: "
+                             "1 m) (default %(default)s)")
+    parser.add_argument("--handback", type=float, default=LoopRules.handback_s, metavar="S",
+                        help="after a take-over the person drives the recorded path S seconds before handing back "
+                             f"(the {LoopRules.seconds_per_intervention:g} s Eq. 2 charges for it; 0: at once, as "
+                             "DAVE-2's simulator) (default %(default)s)")
+
+
 def smooth_alpha(args: argparse.Namespace) -> float | None:
     """The ``--smooth`` value (None: the model's own), or a CommandError in one line."""
     from drive_server.smoothing import check_alpha

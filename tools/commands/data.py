@@ -10,14 +10,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tools.arguments import add_smooth_argument, add_speed_unit_argument, smooth_alpha
+from tools.arguments import add_loop_rule_arguments, add_smooth_argument, add_speed_unit_argument, smooth_alpha
 from tools.realdata.fetch import DEFAULT_BASE_URL
 from tools.realdata.recordings import TRACKS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tools.drivelog.loop import LoopRules
-
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
                                 help="stats: a table per recording; clean: a cleaned log; road: the road's edges; "
                                      "fetch: the public recordings; "
@@ -100,15 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cv.add_argument("--track", choices=TRACKS, default=None, help="only the recordings of this track")
     cv.add_argument("--name", action="append", default=None, metavar="NAME", help="only this recording (repeat)")
     cv.add_argument("--no-closed-loop", action="store_true", help="open loop only (minutes instead of ~10)")
-    cv.add_argument("--lane", choices=("road", "path"), default=LoopRules.lane,
-                    help="closed loop: a take-over when the car leaves the road (road) or is --max-offset from the "
-                         "driver's line (path), as rbc drive-log (default %(default)s)")
-    cv.add_argument("--max-offset", type=float, default=LoopRules.max_offset_m, metavar="M",
-                    help="with --lane path: metres off the recorded path at which a person takes over, as rbc "
-                         "drive-log (default %(default)s)")
-    cv.add_argument("--handback", type=float, default=None, metavar="S",
-                    help="closed loop: seconds a person drives after a take-over before handing back, as rbc "
-                         "drive-log (default: its 6)")
+    add_loop_rule_arguments(cv)  # as rbc drive-log's
     add_smooth_argument(cv)
     cv.add_argument("--workers", type=int, default=2, help="recordings scored at once (default %(default)s)")
     cv.add_argument("--json", type=Path, default=None, metavar="OUT",
@@ -146,8 +136,7 @@ def _crossval(args: argparse.Namespace) -> int:
         raise CommandError("no public recording among those named")
     if not 1 <= args.workers <= 64:
         raise CommandError("--workers must be 1..64")
-    rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset,  # they check their own ranges
-                      **({} if args.handback is None else {"handback_s": args.handback}))
+    rules = LoopRules(lane=args.lane, max_offset_m=args.max_offset, handback_s=args.handback)  # checks its ranges
     if args.plot:  # before hours of scoring, not after
         import importlib.util
 

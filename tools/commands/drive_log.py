@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tools.arguments import add_smooth_argument, smooth_alpha
+from tools.arguments import add_loop_rule_arguments, add_smooth_argument, smooth_alpha
 from tools.errors import CommandError
 
 if TYPE_CHECKING:
@@ -29,14 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steer-bias", type=float, default=0.0, metavar="B",
                    help="added to every steering value (a biased driver must fail: a check of the measure)")
     add_smooth_argument(p)
-    p.add_argument("--lane", choices=("road", "path"), default=LoopRules.lane,
-                   help="road: a person takes over when the car's side passes an edge line of the road, found in "
-                        "each recorded frame; path: when the car is --max-offset from the driver's own line (DAVE-2)")
-    p.add_argument("--max-offset", type=float, default=LoopRules.max_offset_m, metavar="M",
-                   help="with --lane path: metres off the driver's line at which a person takes over (DAVE-2: 1 m)")
-    p.add_argument("--handback", type=float, default=LoopRules.handback_s, metavar="S",
-                   help="after a take-over the person drives the recorded path S seconds before handing back (the "
-                        "6 s Eq. 2 charges for it; 0: at once, as DAVE-2's simulator) (default %(default)s)")
+    add_loop_rule_arguments(p)
     p.add_argument("--views", choices=("nearest", "centre"), default=LoopRules.views,
                    help="nearest: re-project the nearest of the three recorded cameras (the side ones are real views "
                         "0.95 m to each side); centre: the centre camera only (DAVE-2)")

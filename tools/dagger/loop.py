@@ -31,8 +31,9 @@ from typing import Any
 
 from drive_server.runrecords import code_version, file_sha256, read_json, write_json, write_text
 from protocol.errors import BadValue
-from tools.dagger.config import TARGET_ETA, DaggerConfig
+from tools.dagger.config import DaggerConfig
 from tools.dagger.rollout import SUMMARY, CollectionStats, collect_round, read_stats
+from tools.sim.driving.rules import TARGET_ETA
 
 log = logging.getLogger(__name__)
 

@@ -13,8 +13,9 @@ from typing import Any
 
 from drive_server.runrecords import code_version, read_json, write_json, write_text
 from protocol.errors import BadValue
-from tools.dagger.config import TARGET_ETA, DaggerConfig
+from tools.dagger.config import DaggerConfig
 from tools.dagger.loop import SUMMARY_JSON
+from tools.sim.driving.rules import TARGET_ETA
 
 CURVE = "curve.png"
 

@@ -140,7 +140,7 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
                         break
             finally:
                 env.close()
-            clock += config.episode_steps / 15.0 + 10.0
+            clock += config.episode_steps / env.unwrapped.config.control_hz + 10.0  # a pause: a new session
             stats.episodes += 1
             stats.world_seeds += (episode.world_seed,)
             if progress is not None:

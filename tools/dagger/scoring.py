@@ -18,10 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.runrecords import write_text
-from tools.dagger.config import PERTURBATIONS, TARGET_ETA, DaggerConfig
+from tools.dagger.config import PERTURBATIONS, DaggerConfig
 from tools.evaluate.experiments import is_autonomous, run_eta
 from tools.evaluate.runner import DriverSpec, Runner, read_journal
 from tools.evaluate.suite import SuiteConfig, run_suite
+from tools.sim.driving.rules import TARGET_ETA
 
 log = logging.getLogger(__name__)
 

@@ -33,11 +33,12 @@ import numpy as np
 
 from protocol.camera import CAR_HALF_WIDTH_M
 from protocol.errors import BadValue
+from protocol.facts import DEPLOY_SPEED_KMH
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ViewSynthesizer
 from tools.drivelog.path import WHEELBASE_M, RecordedDrive, advance, curvature
 from tools.drivelog.road import RoadEdges
-from tools.sim.driving.rules import degree_of_autonomy
+from tools.sim.driving.rules import Rules, degree_of_autonomy
 
 #: Below this speed (m/s) the car is standing or creeping: time there is not counted as driving.
 MOVING_MPS = 1.0
@@ -69,11 +70,11 @@ class LoopRules:
     wheelbase_m: float = WHEELBASE_M
     # the car's speed: the recorded one capped here, km/h (0: as recorded). 25: drive_server's default limit,
     # the speed a model is deployed at (the paper's 25 km/h)
-    speed_limit_kmh: float = 25.0
-    seconds_per_intervention: float = 6.0  # the paper's Eq. 1 (after DAVE-2)
+    speed_limit_kmh: float = DEPLOY_SPEED_KMH
+    seconds_per_intervention: float = Rules.seconds_per_intervention  # the paper's Eq. 1 (after DAVE-2)
     # after a take-over the person drives the recorded path this long (s of the log) before handing back: the
     # time Eq. 2 charges for it (0: at once, as DAVE-2's simulator; the measure before December 2026)
-    handback_s: float = 6.0
+    handback_s: float = Rules.seconds_per_intervention
 
     def __post_init__(self) -> None:
         """The one check of the rules, whichever command (``rbc drive-log``, ``rbc data crossval``) made them."""
@@ -133,8 +134,6 @@ class LoopResult:
 
     @property
     def eta(self) -> float:
-        from tools.sim.driving.rules import Rules
-
         eta, _ = degree_of_autonomy(self.interventions, self.driving_time_s,
                                     Rules(seconds_per_intervention=self.rules.seconds_per_intervention))
         return eta

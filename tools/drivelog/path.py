@@ -19,11 +19,10 @@ import numpy as np
 
 from protocol.datalog import Sample
 from protocol.errors import BadValue
+from protocol.facts import MAX_STEERING_DEG
 from protocol.stamps import frame_time, session_ids
 from protocol.units import SpeedUnit, to_kmh
 
-#: Largest steering angle of the simulator, degrees (normalised steering x this).
-MAX_STEER_DEG = 25.0
 #: Wheelbase of the Udacity car, metres (a mid-size saloon; only scales how fast steering turns the car).
 WHEELBASE_M = 2.6
 #: Frame intervals beyond this are a pause (or a restart) of the recording: a new session starts.
@@ -35,7 +34,7 @@ DEFAULT_DT_S = 0.1
 
 def curvature(steering: np.ndarray | float, wheelbase_m: float = WHEELBASE_M) -> np.ndarray:
     """Path curvature (1/m, positive turning right) of a normalised steering value."""
-    return np.tan(np.radians(np.asarray(steering, np.float64) * MAX_STEER_DEG)) / wheelbase_m
+    return np.tan(np.radians(np.asarray(steering, np.float64) * MAX_STEERING_DEG)) / wheelbase_m
 
 
 @dataclass(frozen=True)

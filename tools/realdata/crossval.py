@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tools.realdata.recordings import PublicRecording
+from tools.sim.driving.rules import TARGET_ETA
 
 if TYPE_CHECKING:
     from tools.drivelog.loop import LoopRules
@@ -75,10 +76,6 @@ class TrackSummary:
     worst_eta: float | None = None  # the targets are per recording: every one at TARGET_ETA or more
     at_least_95: int | None = None
     takeovers: int | None = None
-
-
-#: The closed loop's target per recording, degree of autonomy in %.
-TARGET_ETA = 95.0
 
 
 def model_for(pattern: str, rec: PublicRecording) -> Path:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.runrecords import atomic_path
-from tools.realdata.crossval import TARGET_ETA
+from tools.sim.driving.rules import TARGET_ETA
 
 TRACKS = ("lake", "mountain", "jungle")
 

@@ -55,6 +55,9 @@ class Rules:
 
 #: The rules every run uses unless an experiment says otherwise.
 DEFAULT_RULES = Rules()
+#: The degree of autonomy (%) every drive is to reach: each public recording in the closed loop (rbc data
+#: crossval), each unseen world (rbc dagger).
+TARGET_ETA = 95.0
 
 
 def degree_of_autonomy(interventions: int, lap_time_s: float, rules: Rules = DEFAULT_RULES) -> tuple[float, bool]:
