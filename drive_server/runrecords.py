@@ -46,7 +46,7 @@ def _umask() -> int:
     return mask
 
 
-def write_bytes(path: Path, write: Callable[[Path], None]) -> None:
+def write_bytes(path: Path, write: Callable[[Path], object]) -> None:
     """Atomically create ``path`` with ``write(tmp_path)`` (for writers that want a file name)."""
     with atomic_path(path) as tmp:
         write(tmp)

@@ -110,7 +110,8 @@ def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
                      "bad_input": s.bad_input, "bad_output": s.bad_output})
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
     with atomic_path(path) as tmp, tmp.open("wb") as fh:  # a file object: np.savez would add ".npz" to a name
-        np.savez(fh, **arrays)
+        # numpy's stub reads **arrays as possibly naming its allow_pickle (a bool); the names are s0, s1, ..., meta
+        np.savez(fh, **arrays)  # type: ignore[arg-type]
 
 
 def load_stats(path: Path) -> list[LatencyStats]:

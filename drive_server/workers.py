@@ -42,7 +42,7 @@ def _run_worker(index: int, sock: socket.socket, make_server: Callable[[ServerCo
                 config: ServerConfig) -> int:
     """Body of one forked worker: serve until SIGTERM, then hand the statistics back."""
     for handler in logging.getLogger().handlers:
-        fmt = handler.formatter._fmt if handler.formatter else "%(message)s"  # type: ignore[union-attr]
+        fmt = (handler.formatter._fmt if handler.formatter else None) or "%(message)s"
         handler.setFormatter(logging.Formatter(fmt.replace("%(name)s", f"%(name)s[w{index}]"), "%H:%M:%S"))
     server = make_server(config)
     server.adopt(sock)

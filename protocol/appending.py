@@ -22,7 +22,7 @@ def append_whole(fd: int, data: bytes) -> None:
         raise
 
 
-def append_record(path: os.PathLike | str, data: bytes) -> None:
+def append_record(path: os.PathLike[str] | str, data: bytes) -> None:
     """Open ``path`` for appending, :func:`append_whole` ``data``, close it."""
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
     try:

@@ -25,12 +25,12 @@ REAL_RIG = "unity"
 MIXED = ""
 
 
-def _folder(data: Path) -> Path:
+def _folder(data: Path | str) -> Path:
     data = Path(data)
     return data.parent if data.suffix.lower() == ".csv" else data
 
 
-def read_rig(data: Path) -> str:
+def read_rig(data: Path | str) -> str:
     """The rig of the recording in ``data`` (a folder, or its log file); :data:`REAL_RIG` without a rig file."""
     path = _folder(data) / RIG_FILE
     try:
@@ -55,7 +55,7 @@ def write_rig(folder: Path, rig: str, append: bool = False) -> None:
     tmp.replace(folder / RIG_FILE)
 
 
-def data_rig(sources: Iterable[Path]) -> str:
+def data_rig(sources: Iterable[Path | str]) -> str:
     """The one rig of all ``sources``, or :data:`MIXED` when they differ."""
     rigs = {read_rig(s) for s in sources}
     return rigs.pop() if len(rigs) == 1 else MIXED

@@ -23,9 +23,9 @@ def frame_time(name: str | PurePath) -> float | None:
     m = _STAMP.search(PurePath(name).stem)
     if not m:
         return None
-    *fields, ms = (int(g) for g in m.groups())
+    year, month, day, hour, minute, second, ms = (int(g) for g in m.groups())
     try:
-        when = dt.datetime(*fields)
+        when = dt.datetime(year, month, day, hour, minute, second)
     except ValueError:  # month 13 and the like: not a time stamp
         return None
     return (when - _EPOCH).total_seconds() + ms / 1000

@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import TYPE_CHECKING, overload
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
 KMH_PER_MPH = 1.609344
 
@@ -12,8 +17,12 @@ class SpeedUnit(StrEnum):
     KMH = "kmh"
 
 
-def to_kmh(speed: float, unit: SpeedUnit | str) -> float:
-    """Convert a telemetry speed in ``unit`` to km/h."""
+@overload
+def to_kmh(speed: float, unit: SpeedUnit | str) -> float: ...
+@overload
+def to_kmh(speed: NDArray[np.float64], unit: SpeedUnit | str) -> NDArray[np.float64]: ...
+def to_kmh(speed: float | NDArray[np.float64], unit: SpeedUnit | str) -> float | NDArray[np.float64]:
+    """Convert a telemetry speed in ``unit`` (one, or an array of them) to km/h."""
     return speed * KMH_PER_MPH if SpeedUnit(unit) is SpeedUnit.MPH else speed
 
 

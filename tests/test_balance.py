@@ -11,11 +11,19 @@ import pytest
 from models.data.balance import balanced_pass, index_batches, zero_steer_drop_count
 from models.data.behavior import BEHAVIOR_SPECS, Behavior
 from models.data.split import split_indices
+from protocol.facts import BEHAVIORS
 
 
 @pytest.mark.parametrize(("d", "lam"), [(433, 0.7), (10, 0.7), (10, 0.8), (3, 0.7), (7, 0.0), (7, 1.0), (0, 0.8)])
 def test_drop_count_is_floor_of_d_lambda(d: int, lam: float) -> None:
     assert zero_steer_drop_count(d, lam) == math.floor(round(d * lam, 9))
+
+
+def test_behavior_members_are_the_protocols_behaviors() -> None:
+    """Behavior is spelled out for the type checker: it must stay protocol.facts.BEHAVIORS, in order."""
+    assert tuple(Behavior) == BEHAVIORS
+    assert [b.name for b in Behavior] == [name.upper() for name in BEHAVIORS]
+    assert set(BEHAVIOR_SPECS) == set(Behavior)
 
 
 def test_paper_deletion_rates() -> None:

@@ -25,3 +25,11 @@ def test_rbc_fuzz_small_campaign(tmp_path):
     assert result["fds"]["after_all"] <= result["fds"]["before"]
     assert "healthy 30 Hz clients beside 2 misbehaving ones" in proc.stdout
     assert "Traceback" not in proc.stdout + proc.stderr
+
+
+def test_the_memory_report_of_a_server_gone_during_the_campaign():
+    """Was: ``rss1 - rss0`` with the server gone (no RSS) raised a TypeError instead of reporting the crash."""
+    from tools.bench.fuzz import memory_report
+
+    assert memory_report(51.5, 50.0, 14, 12) == "RSS 51.5 MiB (+1.5 MiB), 14 open fds (baseline 12)"
+    assert memory_report(None, 50.0, None, 12) == "RSS unknown, None open fds (baseline 12)"

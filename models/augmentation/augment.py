@@ -214,13 +214,13 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
 
     # the labels, in the order the views are made: camera (moved), edge pull, flip, shift, turn
     label = perspective_label(steering, camera, spec.gamma)
-    if offset is not None:
+    if offset is not None and offset_m is not None:  # drawn together
         label = np.where(offset, offset_label(label, offset_m, spec.offset_lookahead_m), label)
     if spec.edge_gain > 0 and middles is not None:  # before the flip, which mirrors the road too
         label = np.clip(label + edge_pull(middles, camera, spec, offset_m), -1.0, 1.0)
     label = np.where(flip, -label, label) + 0.0  # no -0.0 labels
     label = np.clip(np.where(shift, label + shift_px * spec.shift_steering_per_px, label), -1.0, 1.0)
-    if yaw is not None:
+    if yaw is not None and yaw_deg is not None:  # drawn together
         back = -spec.yaw_gain * yaw_deg / MAX_STEERING_DEG  # the turn is drawn before the flip mirrors it
         label = np.clip(label + np.where(flip, -back, back), -1.0, 1.0) + 0.0
 
@@ -316,9 +316,10 @@ def augment_reference(frames: dict[str, np.ndarray], params: AugParams, i: int,
         img = shadows(img, params.shadow_xy[i], spec.shadow_darkness)
     if params.brightness[i]:
         img = brightness(img, float(params.beta[i]), spec.brightness_mode)
-    if params.moved[i]:  # moved first, then turned: the view of the camera moved, then turned (one homography)
+    # moved first, then turned: the view of the camera moved, then turned (one homography)
+    if params.moved[i] and params.offset_m is not None:
         img = move(img, float(params.offset_m[i]), spec)
-    if params.turned[i]:
+    if params.turned[i] and params.yaw_deg is not None:
         img = turn(img, float(params.yaw_deg[i]), spec)
     if params.flip[i]:
         img, _ = flip(img, 0.0)

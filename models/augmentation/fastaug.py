@@ -144,6 +144,9 @@ class FastAugmenter:
                pulls: np.ndarray) -> None:
         """Warp the samples seen from a moved camera: shadows drawn on the cached frame, then one ``cv2.remap``
         through the per-pixel map (``pulls``: the chain's, network corner -> full-res corner, per warped sample)."""
+        offset_m = params.offset_m
+        if offset_m is None:  # a spec without the offset augmentation: no sample moved
+            return
         which = np.flatnonzero(params.moved)
         slots = self._slot[params.camera[which]]
         src = self.cache.frames[slots, idx[which]]  # a copy
@@ -156,7 +159,7 @@ class FastAugmenter:
         grid = np.stack([gx.ravel(), gy.ravel(), np.ones(w * h)])
         q = pulls[np.searchsorted(warped, which)] @ grid  # full-res corner coordinates of the moved view
         sx, sy = geometry.offset_sources(FRAME_WIDTH, FRAME_HEIGHT, q[:, 0] / q[:, 2] - 0.5, q[:, 1] / q[:, 2] - 0.5,
-                                         params.offset_m[which], self.spec.camera_vfov_deg,
+                                         offset_m[which], self.spec.camera_vfov_deg,
                                          self.spec.camera_pitch_deg, self.spec.camera_height_m)
         f = self._from_full  # affine: full-res corner -> network corner, then network index
         nx = (f[0, 0] * (sx + 0.5) + f[0, 2] - 0.5).astype(np.float32).reshape(-1, h, w)

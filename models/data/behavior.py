@@ -13,10 +13,15 @@ from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessCon
 from models.augmentation.augment import AugmentSpec
 from models.networks.architectures import ARCHITECTURES, Arch
 from protocol.errors import BadValue
-from protocol.facts import BEHAVIORS
 
-#: The paper's behaviors; the names are protocol.facts.BEHAVIORS (defined there once).
-Behavior = StrEnum("Behavior", [(name.upper(), name) for name in BEHAVIORS])
+
+class Behavior(StrEnum):
+    """The paper's behaviors: protocol.facts.BEHAVIORS, in its order (tests/test_balance.py holds them equal);
+    spelled out so the type checker knows the members."""
+
+    SIMPLISTIC = "simplistic"
+    RIGOROUS = "rigorous"
+    COLLISION = "collision"
 
 
 class Approach(StrEnum):

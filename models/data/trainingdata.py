@@ -86,7 +86,7 @@ class PreparedData:
         stride = f", 1 row in {c['stride']} used" if c.get("stride", 1) > 1 else ""
         return (f"rows: {c['rows']} read, {c['skipped']} skipped (bad rows or missing images){stride}, "
                 f"{c['unreadable']} with unreadable frames, {slow}; {c['kept']} kept: "
-                f"{c['train']} training + {c['val']} validation ({self.split.kind.value} split{gap})")
+                f"{c['train']} training + {c['val']} validation ({SplitKind(self.split.kind).value} split{gap})")
 
 
 def split_logs(data: Sequence[Path | str], seed: int, options: DataOptions = DataOptions()
@@ -140,9 +140,9 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     middles = None
     if options.centre_gain or options.road_middles:
         middles = road_middles(dataset, missing_ok=not options.centre_gain)
-    if options.centre_gain:
-        labels = np.clip((steering if labels is None else labels)
-                         + options.centre_gain * middles, -1.0, 1.0).astype(np.float32)
+        if options.centre_gain:
+            labels = np.clip((steering if labels is None else labels)
+                             + options.centre_gain * middles, -1.0, 1.0).astype(np.float32)
     return PreparedData(dataset, cache, usable, train, val, steering, sides, counts, options.split, labels,
                         recording=recording, middles=middles if options.road_middles else None)
 

@@ -128,8 +128,7 @@ def count_parameters(model: nn.Module) -> int:
 def conv_activations(model: nn.Module, x: torch.Tensor) -> list[torch.Tensor]:
     """Outputs of every convolution layer after its activation (paper Fig. 12), NCHW."""
     out = []
-    features = model.features  # type: ignore[attr-defined]
-    for layer in features:
+    for layer in model.get_submodule("features").children():  # TableNet's: conv, ReLU, ... (distinct modules)
         x = layer(x)
         if not isinstance(layer, nn.Conv2d):
             out.append(x)

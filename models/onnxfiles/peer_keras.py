@@ -19,6 +19,7 @@ import json
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -30,6 +31,9 @@ from protocol.datalog import read_log
 from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 from protocol.rigfile import REAL_RIG
+
+if TYPE_CHECKING:
+    import h5py
 
 PEER_REPO = "naokishibuya/car-behavioral-cloning"
 PEER_COMMIT = "edf2061"
@@ -136,10 +140,10 @@ class PeerPilotNet(nn.Module):
         return self.head(self.features(yuv / 127.5 - 1.0))
 
 
-def _load(layer: nn.Module, w: np.ndarray, b: np.ndarray) -> None:
+def _load(layer: nn.Conv2d | nn.Linear, w: np.ndarray, b: np.ndarray) -> None:
     with torch.no_grad():
         layer.weight.copy_(torch.from_numpy(np.ascontiguousarray(w, dtype=np.float32)))
-        layer.bias.copy_(torch.from_numpy(np.asarray(b, dtype=np.float32)))
+        layer.get_parameter("bias").copy_(torch.from_numpy(np.asarray(b, dtype=np.float32)))
 
 
 def _feature_shape(features: nn.Module) -> tuple[int, int, int]:
@@ -189,14 +193,15 @@ def _text(value: object) -> str:
 def _check_layers(path: Path, layers: object) -> list[str]:
     """Layer names of a config matching ARCH; PeerImportError naming the first difference."""
     if not isinstance(layers, list) or len(layers) != len(ARCH):
-        got = [layer.get("class_name") for layer in layers if isinstance(layer, dict)] if isinstance(layers, list) \
+        found = [layer.get("class_name") for layer in layers if isinstance(layer, dict)] if isinstance(layers, list) \
             else layers
         raise PeerImportError(f"{path}: expected the peer's {len(ARCH)} layers "
-                              f"({', '.join(a[0] for a in ARCH)}), the file has {got}")
+                              f"({', '.join(a[0] for a in ARCH)}), the file has {found}")
     names = []
     for i, (layer, spec) in enumerate(zip(layers, ARCH, strict=True)):
         cfg = layer.get("config", {}) if isinstance(layer, dict) else {}
         kind = layer.get("class_name") if isinstance(layer, dict) else None
+        got: tuple[object, ...]
         if kind == "Convolution2D":
             stride = (cfg.get("subsample") or [1])[0]
             got = (kind, cfg.get("nb_filter"), cfg.get("nb_row"), stride, cfg.get("activation"))
@@ -232,7 +237,7 @@ def _check_lambda(path: Path, cfg: dict) -> None:
         raise PeerImportError(f"{path}: the input Lambda is not the peer's x/127.5 - 1 normalisation")
 
 
-def _weights(path: Path, group: object, name: str, rank: int) -> tuple[np.ndarray, np.ndarray]:
+def _weights(path: Path, group: h5py.Group, name: str, rank: int) -> tuple[np.ndarray, np.ndarray]:
     if name not in group:
         raise PeerImportError(f"{path}: no weights for layer {name!r} under model_weights/")
     layer = group[name]
@@ -247,7 +252,8 @@ def _weights(path: Path, group: object, name: str, rank: int) -> tuple[np.ndarra
     return w, b
 
 
-def _check_shapes(path: Path, convs: list, dense: list) -> None:
+def _check_shapes(path: Path, convs: list[tuple[np.ndarray, np.ndarray]],
+                  dense: list[tuple[np.ndarray, np.ndarray]]) -> None:
     channels, height, width = 3, PEER_CONTRACT.height, PEER_CONTRACT.width
     for (w, _), spec in zip(convs, ARCH[1:6], strict=True):
         want = (spec[2], spec[2], channels, spec[1])
@@ -256,10 +262,10 @@ def _check_shapes(path: Path, convs: list, dense: list) -> None:
                                   "(rows, cols, in, out)")
         channels, height, width = spec[1], (height - spec[2]) // spec[3] + 1, (width - spec[2]) // spec[3] + 1
     features = channels * height * width
-    for (w, _), spec in zip(dense, ARCH[8:], strict=True):
-        if w.shape != (features, spec[1]):
-            raise PeerImportError(f"{path}: a dense kernel is {list(w.shape)}, expected {[features, spec[1]]}")
-        features = spec[1]
+    for (w, _), dense_spec in zip(dense, ARCH[8:], strict=True):
+        if w.shape != (features, dense_spec[1]):
+            raise PeerImportError(f"{path}: a dense kernel is {list(w.shape)}, expected {[features, dense_spec[1]]}")
+        features = dense_spec[1]
 
 
 def model_info(weights: PeerWeights, h5: Path, yuv: str) -> dict:

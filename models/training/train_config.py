@@ -20,7 +20,7 @@ from models.data.behavior import (
     keeps_lane,
     pipeline_for,
 )
-from models.data.split import SplitSpec
+from models.data.split import SplitKind, SplitSpec
 from models.data.trainingdata import DataOptions
 from protocol.camera import SIDE_OFFSET_M as SIDE_CAMERA_OFFSET_M  # Eq. 4/5's numerator
 from protocol.errors import BadValue
@@ -76,7 +76,7 @@ class TrainConfig:
     seed: int = 0
     max_steps_per_epoch: int | None = None
     val_fraction: float = SplitSpec.val_fraction
-    split: str = SplitSpec.kind.value  # "blocks": contiguous stretches held out; "random": the paper's
+    split: str = SplitKind.BLOCKS.value  # "blocks": contiguous stretches held out; "random": the paper's
     block_frames: int = SplitSpec.block_frames
     gap_frames: int = SplitSpec.gap_frames
     export: str = "best"  # "best": the epoch with the lowest validation MSE; "last": the final epoch

@@ -10,6 +10,7 @@ import torch
 
 from drive_server import runrecords
 from models.data.behavior import Pipeline
+from models.data.split import SplitKind
 from models.data.trainingdata import PreparedData
 from models.training.recipe import recipe_sections
 from models.training.train_config import TrainConfig
@@ -26,7 +27,7 @@ def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, e
             "deletion_rate": pipeline.deletion_rate, "optimizer": "Adam", "loss": "MSE",
             "train_samples": int(len(data.train)), "val_samples": int(len(data.val)),
             "zero_steer_train_samples": int((data.steering[data.train] == 0).sum()),
-            "split": asdict(data.split) | {"kind": data.split.kind.value},
+            "split": asdict(data.split) | {"kind": SplitKind(data.split.kind).value},
         },
         "rows": data.counts,
         "augment": asdict(pipeline.augment),

@@ -99,7 +99,8 @@ def _flooder(url: str, stop: Any, nice: bool) -> None:
             time.sleep(0.05)
 
 
-def _fuzzer(url: str, frames: list[Frame], reference: list[SteerCommand], stop: Any, nice: bool, seed: int) -> None:
+def _fuzzer(url: str, frames: list[Frame], reference: list[SteerCommand | None], stop: Any, nice: bool,
+            seed: int) -> None:
     if nice:
         _step_aside()
     rng = random.Random(seed)
@@ -118,7 +119,7 @@ def _percentiles(rtts_s: list[float]) -> dict[str, float]:
             "p99_ms": round(float(np.percentile(ms, 99)), 3), "max_ms": round(float(ms.max()), 3)}
 
 
-def fairness(url: str, frames: list[Frame], reference: list[SteerCommand], healthy: int, duration: float,
+def fairness(url: str, frames: list[Frame], reference: list[SteerCommand | None], healthy: int, duration: float,
              nice: bool, seed: int, phase_s: float = 2.0, settle_s: float = 0.3) -> tuple[dict, dict]:
     """Healthy clients' round trips alone and beside two misbehaving clients, as (alone, beside).
 
@@ -176,6 +177,12 @@ def open_fds(pid: int | None) -> int | None:
         return len(os.listdir(f"/proc/{pid}/fd")) if pid is not None else None
     except OSError:
         return None
+
+
+def memory_report(rss: float | None, rss0: float | None, fds: int | None, fds0: int | None) -> str:
+    """The server's RSS and open fds beside the baseline; a server gone meanwhile has no RSS (was: a traceback)."""
+    change = f" ({rss - rss0:+.1f} MiB)" if rss is not None and rss0 is not None else ""
+    return f"RSS {'unknown' if rss is None else f'{rss} MiB'}{change}, {fds} open fds (baseline {fds0})"
 
 
 def settled_fds(pid: int | None, baseline: int | None, timeout: float = 10.0) -> int | None:

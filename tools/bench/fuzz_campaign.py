@@ -107,7 +107,7 @@ def _reply_kind(reply: SteerCommand | None) -> str:
     return MANUAL if reply is None else STEER
 
 
-def fuzz_connection(url: str, mix: Mix, reference: list[SteerCommand], batch: int, tally: Tally,
+def fuzz_connection(url: str, mix: Mix, reference: list[SteerCommand | None], batch: int, tally: Tally,
                     rng: random.Random) -> None:
     """One connection: ``batch`` telemetries in windows, a sentinel, then a normal close or a protocol error."""
     with UnityWireClient(url) as client:
@@ -139,7 +139,7 @@ def fuzz_connection(url: str, mix: Mix, reference: list[SteerCommand], batch: in
                 tally.add(closed_on_error=1)
 
 
-def campaign(url: str, frames: list[Frame], reference: list[SteerCommand], total: int, seed: int,
+def campaign(url: str, frames: list[Frame], reference: list[SteerCommand | None], total: int, seed: int,
              threads: int = 2) -> Tally:
     tally = Tally()
     per_thread = total // threads

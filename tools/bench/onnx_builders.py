@@ -67,7 +67,7 @@ def build_model(arch: Arch, contract: PreprocessContract | None = None, seed: in
         return name
 
     in_shape = [1, arch.height, arch.width, 3] if layout == "nhwc" else [1, 3, arch.height, arch.width]
-    graph_in = helper.make_tensor_value_info("image", TensorProto.FLOAT, ["batch"] + in_shape[1:])
+    graph_in = helper.make_tensor_value_info("image", TensorProto.FLOAT, ["batch", *in_shape[1:]])
     x = "image"
     if layout == "nhwc":
         nodes.append(helper.make_node("Transpose", [x], ["nchw"], perm=[0, 3, 1, 2]))

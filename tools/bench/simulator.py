@@ -130,14 +130,14 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace, vehicle: str = 
             model = save_model("shallow", Path(tmp) / "shallow.onnx")
         can_pin = hasattr(os, "sched_setaffinity")
         before = os.sched_getaffinity(0) if can_pin else None
-        if can_pin:
+        if before is not None:
             os.sched_setaffinity(0, {min(before)})
         try:
             with ServerProcess(model, ["--log-every", "0"]) as server, SocketDriver(server.url) as driver:
                 result = run_scenario(ScenarioConfig(track="lake", speed_limit_kmh=DEPLOY_SPEED_KMH, vehicle=vehicle),
                                       driver)
         finally:
-            if can_pin:
+            if before is not None:
                 os.sched_setaffinity(0, before)
     lap = result.laps[0] if result.laps else None
     per_frame = result.wall_time_s / max(1, result.frames)

@@ -134,7 +134,7 @@ class Soak(SoakMix):
     def _window(self, a: float, b: float) -> tuple[int, float | None, float | None]:
         with self.lock:
             lists = list(self.rtts)
-        ms = []
+        ms: list[float] = []
         for rtts in lists:
             k = bisect.bisect_left(rtts, (a, -1.0))  # appended in time order
             ms.extend(rtt for t, rtt in itertools.takewhile(lambda x: x[0] < b, rtts[k:]))

@@ -16,6 +16,7 @@ import time
 import urllib.request
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from typing import Any
 
 from protocol import SteerCommand
@@ -75,7 +76,7 @@ class SoakMix:
 
     def threads(self, rates_hz: list[float]) -> list[threading.Thread]:
         bodies: list[Callable[[Tally], None]] = [
-            (lambda tally, hz=hz, n=n: self._driving(tally, hz, 7 * n)) for n, hz in enumerate(rates_hz)]
+            partial(self._driving, rate_hz=hz, offset=7 * n) for n, hz in enumerate(rates_hz)]
         bodies += [self._reconnecting, self._idle, self._malformed, self._live_view]
         return [threading.Thread(target=self._counted, args=(body,), daemon=True) for body in bodies]
 

@@ -107,11 +107,12 @@ def _write_preview(args: argparse.Namespace, config: TrainConfig) -> int:
         a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{_describe(params, k)}", fontsize=6.5)
         a_net.imshow(net, interpolation="nearest")
         a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=6.5)
-    a, c = pipeline.augment, pipeline.contract
+    a, contract = pipeline.augment, pipeline.contract
     bright = f"p + U(-{a.brightness_range:g}, {a.brightness_range:g})" if a.brightness_mode == "add" else \
         f"p x (1 + U(-{a.brightness_range:g}, {a.brightness_range:g}))"
     fig.suptitle(f"{config.behavior} / {config.approach}: recorded label -> training label "
-                 f"(left: full-resolution reference, right: training input, rows {c.crop_top}-{c.crop_bottom}); "
+                 f"(left: full-resolution reference, right: training input, "
+                 f"rows {contract.crop_top}-{contract.crop_bottom}); "
                  f"brightness {bright}", fontsize=9)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -81,7 +81,9 @@ def _light_range(text: str) -> tuple[float, float]:
         values = (float(lo), float(hi)) if sep else None
     except ValueError:
         values = None
-    problem = light_range_problem(*values) if values else f"expected LO:HI, e.g. 0.5:2, got {text!r}"
+    if values is None:
+        raise argparse.ArgumentTypeError(f"expected LO:HI, e.g. 0.5:2, got {text!r}")
+    problem = light_range_problem(*values)
     if problem:
         raise argparse.ArgumentTypeError(problem)
     return values

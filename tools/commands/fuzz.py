@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from drive_server.runrecords import write_json
-from tools.bench.fuzz import fairness, open_fds, rss_mib, settled_fds
+from tools.bench.fuzz import fairness, memory_report, open_fds, rss_mib, settled_fds
 from tools.bench.fuzz_campaign import DEFAULT_LOG, campaign
 from tools.wire.frames import log_frames, synthetic_frames
 from tools.wire.server_process import ServerProcess
@@ -66,8 +66,7 @@ def run(args: argparse.Namespace) -> int:
               f"wrong commands on good frames {tally.wrong_commands}; connections closed on a protocol error "
               f"{tally.closed_on_error}; connections lost {tally.lost}; crashes {0 if alive else 1}")
         if rss0 is not None:
-            print(f"server after the campaign: RSS {rss1} MiB ({rss1 - rss0:+.1f} MiB), {fds1} open fds "
-                  f"(baseline {fds0})")
+            print(f"server after the campaign: {memory_report(rss1, rss0, fds1, fds0)}")
         nice = not args.no_nice
         alone, beside = fairness(url, frames, reference, args.healthy, args.duration, nice, args.seed)
         print(f"{args.healthy} healthy 30 Hz clients alone: round trip p50 {alone['p50_ms']} ms, p99 "
@@ -77,8 +76,7 @@ def run(args: argparse.Namespace) -> int:
               f"({beside['frames']} frames; the two conditions interleaved every 2 s)")
         rss2, fds2 = rss_mib(pid), settled_fds(pid, fds0)
         if rss0 is not None:
-            print(f"server after everything: RSS {rss2} MiB ({rss2 - rss0:+.1f} MiB), {fds2} open fds "
-                  f"(baseline {fds0})")
+            print(f"server after everything: {memory_report(rss2, rss0, fds2, fds0)}")
         alive = server is None or server.running
         result = {"url": url, "campaign": {k: v for k, v in vars(tally).items() if k != "lock"} | {
                       "wall_s": round(wall, 1), "crashes": 0 if alive else 1},

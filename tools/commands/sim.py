@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 from drive_server.pipeline import DriveConfig
@@ -11,7 +12,7 @@ from tools.arguments import add_camera_argument, add_speed_unit_argument, add_ve
 from tools.console import Progress
 from tools.errors import CommandError
 from tools.sim.driving.pacing import hooks as on_frame_hooks
-from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.scenario import FrameEvent, ScenarioConfig
 from tools.sim.driving.summary import print_summary
 
 log = logging.getLogger("rbc.sim")
@@ -48,6 +49,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float, default=law.tau,
                    help="gain of the throttle/brake law for --model, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
+    p.add_argument("--monitor", choices=("off", "warn", "act"), default="warn",
+                   help="with --model: its misbehaviour monitor, if its file carries one, as drive_server --monitor "
+                        "(default %(default)s: scored and summed up, driving unchanged)")
+    p.add_argument("--monitor-plot", type=Path, default=None, metavar="PNG",
+                   help="with --model and a monitor: its score over the run, thresholds, warnings and take-overs")
     add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
     add_vehicle_argument(p, d.vehicle)
     add_camera_argument(p, None)
@@ -67,13 +73,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _driver(args: argparse.Namespace):
+    from drive_server.monitor import MonitorMode, MonitorPolicy
     from tools.sim.driving.drivers import AutopilotDriver, OnnxDriver, SocketDriver
 
     if args.server:
         return SocketDriver(args.server)
     if args.model:
         return OnnxDriver(args.model, speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
-                          tau=args.tau, speed_unit=args.speed_unit, threads=args.threads)
+                          tau=args.tau, speed_unit=args.speed_unit, threads=args.threads,
+                          monitor=MonitorPolicy(mode=MonitorMode(args.monitor)))
     return AutopilotDriver(speed_kmh=args.speed_limit, seed=args.seed)
 
 
@@ -102,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         note = f"speed limit {args.speed_limit:g} km/h"
 
-    hooks = []
+    hooks: list[Callable[[FrameEvent], None]] = []
     strip = video = None
     if args.strip:
         from tools.sim.pictures.viz import StripCollector
@@ -129,6 +137,18 @@ def run(args: argparse.Namespace) -> int:
         if video is not None:
             video.close()
     print_summary(result, note)
+    monitored = getattr(driver, "readings", None) and driver.monitor is not None
+    if monitored:
+        from tools.monitoreval.summary import monitor_summary
+
+        print(monitor_summary(driver, result))
+    if args.monitor_plot:
+        if not monitored:
+            log.warning("--monitor-plot: no monitor scored this run (a --model carrying one, --monitor warn or act)")
+        else:
+            from tools.monitoreval.plot import plot_run
+
+            print(f"monitor plot {plot_run(driver, result, args.monitor_plot)}")
     if args.json:
         from drive_server.runrecords import write_json
 

@@ -43,7 +43,7 @@ class SideFit:
 
 
 def _matches(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    sift, matcher = cv2.SIFT_create(), cv2.BFMatcher()
+    sift, matcher = cv2.SIFT.create(), cv2.BFMatcher()
     mask = np.zeros(a.shape[:2], np.uint8)
     mask[ROAD_ROWS[0]:ROAD_ROWS[1]] = 255
     ka, da = sift.detectAndCompute(a, mask)
@@ -51,8 +51,8 @@ def _matches(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if da is None or db is None or len(ka) < 2 or len(kb) < 2:
         return np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32)
     good = [m[0] for m in matcher.knnMatch(da, db, k=2) if len(m) == 2 and m[0].distance < 0.7 * m[1].distance]
-    return (np.float32([ka[g.queryIdx].pt for g in good]).reshape(-1, 2),
-            np.float32([kb[g.trainIdx].pt for g in good]).reshape(-1, 2))
+    return (np.array([ka[g.queryIdx].pt for g in good], np.float32).reshape(-1, 2),
+            np.array([kb[g.trainIdx].pt for g in good], np.float32).reshape(-1, 2))
 
 
 def _reprojection(camera: UnityCamera, pairs: Sequence[tuple[np.ndarray, np.ndarray]], pitch: float, offset: float,

@@ -142,10 +142,10 @@ def ground_pitch(centre: list[Path], left: list[Path | None] | None, right: list
     n = len(centre)
     raw = np.full(n, np.nan)
     for i in range(n):
-        sides = [None if frames is None or frames[i] is None else read_jpeg_file(frames[i])
-                 for frames in (left, right)]
+        paths = [None if frames is None else frames[i] for frames in (left, right)]
+        sides = [None if path is None else read_jpeg_file(path) for path in paths]
         if any(s is not None for s in sides):
-            pitch, score = frame_pitch(read_jpeg_file(centre[i]), *sides, camera=camera)
+            pitch, score = frame_pitch(read_jpeg_file(centre[i]), sides[0], sides[1], camera=camera)
             raw[i] = pitch if score >= MIN_CORRELATION else np.nan
         if on_frame:
             on_frame(i + 1, n)

@@ -53,7 +53,7 @@ BRICKS_REDDER = 4.0
 #: recording, is darker than the asphalt's lightness range with about its chroma (jungle: 10-20 %).
 SHADE_MIN_SHARE = 0.02
 _OUTSIDE = (255, 0, 255)  # magenta: pixels beyond the recorded frame (never asphalt)
-_OUTSIDE_LAB = cv2.cvtColor(np.uint8([[_OUTSIDE]]), cv2.COLOR_RGB2LAB)[0, 0].astype(np.float32)
+_OUTSIDE_LAB = cv2.cvtColor(np.array([[_OUTSIDE]], np.uint8), cv2.COLOR_RGB2LAB)[0, 0].astype(np.float32)
 
 
 def _grid() -> tuple[np.ndarray, np.ndarray]:
@@ -162,7 +162,8 @@ def frame_edges(view: np.ndarray, asphalt: Asphalt, line_gap_m: float = 0.0) -> 
         road = _close_lines(road, view, asphalt, line_gap_m)
     outside = np.all(view == _OUTSIDE_LAB, axis=-1)
     centre = len(xs) // 2
-    lefts, rights = [], []
+    lefts: list[float] = []
+    rights: list[float] = []
     beyond = [0, 0]  # rows whose road ran out of the view on the left, on the right
     for row, out in zip(road, outside, strict=True):
         if not row[centre]:

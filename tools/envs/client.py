@@ -75,6 +75,13 @@ class HeadlessSimClient:
             raise RuntimeError("HeadlessSimClient.start() was not called")
         return self.sim
 
+    @property
+    def _seen(self) -> _Snapshot:
+        """Where the car is as the observations see it (after a take-over: where it was before the put-back)."""
+        if self._view is None:
+            raise RuntimeError("HeadlessSimClient.start() was not called")
+        return self._view
+
     def start(self, seed: int, spawn_s: float | None = None, spawn_noise: bool = True, cone_seed: int = 0) -> None:
         """A new run: the car at ``spawn_s`` metres along the track (None: the start line), ``seed`` drawing the
         spawn's noise, the camera bumps, the track's per-frame look and the autopilot's driving line."""
@@ -107,8 +114,9 @@ class HeadlessSimClient:
             before = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
             taken_over = sim.last_intervention
             sim.advance(1, command)
-            if sim.last_intervention is not taken_over:
-                cause = str(sim.last_intervention.cause)
+            intervention = sim.last_intervention
+            if intervention is not taken_over and intervention is not None:
+                cause = str(intervention.cause)
                 self._view = before  # the simulator already put the car back: report where it was
                 break
             if abs(sim.proj.cte * direction - sim.line_offset) > lane_half:
@@ -116,7 +124,7 @@ class HeadlessSimClient:
         if not cause:
             self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
         laps_done = sim.done and bool(sim.laps) and len(sim.laps) >= sim.config.laps and sim.laps[-1].completed
-        return StepReport(progress_m=self._view.progress - progress0, out_of_lane_s=outside, intervention=cause,
+        return StepReport(progress_m=self._seen.progress - progress0, out_of_lane_s=outside, intervention=cause,
                           laps_done=laps_done, time_out=sim.done and not laps_done and not cause)
 
     def follow(self) -> None:
@@ -129,7 +137,9 @@ class HeadlessSimClient:
     def render(self) -> dict[str, np.ndarray]:
         """The cameras' frames (RGB uint8, 160x320) at the car's pose, as the renderer draws them."""
         sim = self._sim
-        st = self._view.state
+        st = self._seen.state
+        if sim.renderer is None:
+            raise RuntimeError("this Simulation was created with render=False")
         half = 0.5 * sim.params.wheelbase_m  # the body centre is half a wheelbase ahead of the rear axle
         pose = Pose(st.x + half * math.cos(st.yaw), st.y + half * math.sin(st.yaw), st.yaw)
         pitch, roll = sim.camera_jitter()
@@ -147,7 +157,7 @@ class HeadlessSimClient:
     # --- ground truth -------------------------------------------------------------------------------
     def wire_speed(self) -> float:
         """The speed the telemetry says (mph, four decimals), parsed as drive_server parses it."""
-        st = self._view.state
+        st = self._seen.state
         payload = encode_telemetry(math.degrees(st.steer), st.throttle, from_kmh(st.speed * 3.6, WIRE_UNIT), "")
         return parse_number(payload["speed"], "speed")
 
@@ -162,12 +172,12 @@ class HeadlessSimClient:
         """
         if self.expert is None:
             raise RuntimeError("HeadlessSimClient.start() was not called")
-        return float(self.expert.wanted_steering(self._view.state))
+        return float(self.expert.wanted_steering(self._seen.state))
 
     def truth(self) -> dict[str, float]:
         """Where the car is against the road: cross-track error from its line (m, + = left), heading error
         (degrees, + = turned left of the lap direction), speed (km/h), progress (m, laps) and time (s)."""
-        sim, view = self._sim, self._view
+        sim, view = self._sim, self._seen
         lap_heading = view.proj.heading_rad if sim.direction > 0 else view.proj.heading_rad + math.pi
         return {
             "cte_m": view.proj.cte * sim.direction - sim.line_offset,

@@ -39,7 +39,7 @@ class DriveEnv(gym.Env):
         self.camera_names = CAMERAS if config.cameras == 3 else ("center",)
         self.observation_space = spaces.Dict({c: frame for c in self.camera_names}) if config.cameras == 3 else frame
         size = 1 if config.control == "steer" else 2
-        self.action_space = spaces.Box(-1.0, 1.0, (size,), np.float32)
+        self.action_space: spaces.Box = spaces.Box(-1.0, 1.0, (size,), np.float32)
         self.client = HeadlessSimClient(
             resolve_track(config), config.camera, self.camera_names, config.jpeg, laps=config.laps,
             vehicle=config.vehicle, speed_limit_kmh=config.speed_limit_kmh, control_hz=config.control_hz,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -70,14 +70,14 @@ def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
             on_frame()
     truth = np.array([steering for _, steering in frames])
     m = steering_metrics(pred, truth)
-    smoothed = {}
+    score = OfflineScore(model=str(model_path), frames=int(m["n"]), mse=m["mse"], pearson_r=m["r"],
+                         zero_mse=m["zero_mse"], smooth=pipeline.smooth)
     if smooth_frames > 1:
         intent = centred_average(truth, smooth_frames)
         ms = steering_metrics(pred, intent)
-        smoothed = {"smooth_frames": smooth_frames, "mse_smoothed": ms["mse"], "pearson_r_smoothed": ms["r"],
-                    "intent_r": steering_metrics(intent, truth)["r"]}
-    return OfflineScore(model=str(model_path), frames=m["n"], mse=m["mse"], pearson_r=m["r"], zero_mse=m["zero_mse"],
-                        smooth=pipeline.smooth, **smoothed)
+        score = replace(score, smooth_frames=smooth_frames, mse_smoothed=ms["mse"], pearson_r_smoothed=ms["r"],
+                        intent_r=steering_metrics(intent, truth)["r"])
+    return score
 
 
 def score_models(models: Sequence[Path], data: Path, camera: str = "center",

@@ -48,7 +48,8 @@ def _list_schedule(times: list[float], workers: int) -> float:
 
 
 def _chains(chains: list[list[float]], workers: int) -> float:
-    ready, position, now, busy = list(range(len(chains))), [0] * len(chains), 0.0, []
+    ready, position, now = list(range(len(chains))), [0] * len(chains), 0.0
+    busy: list[tuple[float, int]] = []  # a heap of (when the chain's running job ends, chain)
     while ready or busy:
         while ready and len(busy) < workers:
             c = ready.pop(0)

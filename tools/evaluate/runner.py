@@ -65,9 +65,11 @@ def _driver(spec: DriverSpec, speed_limit_kmh: float):
     if key not in _DRIVERS:
         if spec.server:
             _DRIVERS[key] = SocketDriver(spec.server)
-        else:
+        elif spec.model:
             _DRIVERS[key] = OnnxDriver(spec.model, speed_limit_kmh=speed_limit_kmh,
                                        steer_limit_deg=spec.steer_limit_deg, tau=spec.tau, threads=spec.threads)
+        else:
+            raise ValueError("give a model (in-process) or a server URL")
     return _DRIVERS[key]
 
 

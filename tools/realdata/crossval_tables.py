@@ -47,7 +47,7 @@ def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScor
         row = (f"| {s.name} | {s.track} | {s.fold} | {s.frames} | {s.zero_mse:.4f} | {mse(s)} | {s.pearson_r:.2f} | "
                f"{_cell(s.intent_r, '.2f')} | {_cell(s.r_to_intent, '.2f')} | {loop(s)} |")
         if peer:
-            p = peer_by_name.get(s.name)
-            row += f" {mse(p)} | {p.pearson_r:.2f} | {loop(p)} |" if p else " – | – | – |"
+            theirs = peer_by_name.get(s.name)
+            row += f" {mse(theirs)} | {theirs.pearson_r:.2f} | {loop(theirs)} |" if theirs else " – | – | – |"
         lines.append(row)
     return "\n".join(lines)

@@ -26,7 +26,7 @@ def draw(real: Sequence[np.ndarray], sim: Sequence[np.ndarray], pairs: Sequence[
     picks = np.linspace(0, len(real) - 1, min(shown, len(real))).round().astype(int)
     pair_rows = (len(picks) + 1) // 2
     fig = plt.figure(figsize=(12, 1.75 * pair_rows + 5.2), layout="constrained")
-    top, bottom = fig.subfigures(2, 1, height_ratios=[1.75 * pair_rows, 5.0])
+    top, bottom = fig.subfigures(2, 1, squeeze=False, height_ratios=[1.75 * pair_rows, 5.0])[:, 0]
     frames = top.subplots(pair_rows, 4, squeeze=False)
     for ax in frames.ravel():
         ax.axis("off")

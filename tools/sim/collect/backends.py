@@ -15,9 +15,10 @@ import logging
 import os
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Generator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 from drive_server.runrecords import file_sha256, write_bytes
@@ -99,14 +100,14 @@ def unpack(job: WorldJob, files: dict[str, bytes]) -> None:
         else:
             target = Path(job.folder) / Path(name).relative_to(_WORLD_FOLDER)
         target.parent.mkdir(parents=True, exist_ok=True)
-        write_bytes(target, lambda tmp, data=data: tmp.write_bytes(data))
+        write_bytes(target, partial(Path.write_bytes, data=data))
 
 
 def _init_worker() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
-def _local(jobs: list[WorldJob], workers: int) -> Iterator[tuple[WorldJob, WorldOutcome]]:
+def _local(jobs: list[WorldJob], workers: int) -> Generator[tuple[WorldJob, WorldOutcome], None, None]:
     if workers <= 1 or len(jobs) <= 1:
         for job in jobs:
             yield job, collect_world(job)
@@ -129,7 +130,8 @@ def _local(jobs: list[WorldJob], workers: int) -> Iterator[tuple[WorldJob, World
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _ray(jobs: list[WorldJob], workers: int, address: str | None) -> Iterator[tuple[WorldJob, WorldOutcome]]:
+def _ray(jobs: list[WorldJob], workers: int,
+         address: str | None) -> Generator[tuple[WorldJob, WorldOutcome], None, None]:
     from tools.ray_support import import_ray, init_ray
 
     ray = import_ray()
@@ -156,7 +158,7 @@ def _ray(jobs: list[WorldJob], workers: int, address: str | None) -> Iterator[tu
 
 
 def run_jobs(jobs: list[WorldJob], workers: int, backend: str = "local",
-             address: str | None = None) -> Iterator[tuple[WorldJob, WorldOutcome]]:
+             address: str | None = None) -> Generator[tuple[WorldJob, WorldOutcome], None, None]:
     """(job, outcome) of every job, in the order they finish (use with ``contextlib.closing``)."""
     if backend not in BACKENDS:
         raise BadValue(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")

@@ -12,9 +12,14 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
+
+if TYPE_CHECKING:
+    from av.container import OutputContainer
+    from av.video.stream import VideoStream
 
 log = logging.getLogger(__name__)
 
@@ -43,8 +48,8 @@ class VideoWriter:
                         "do not play (for H.264: pip install -e \".[video]\")", self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self.path.with_name(f".{self.path.stem}.part{self.path.suffix or '.mp4'}")
-        self._out = None
-        self._stream = None
+        self._av: tuple[OutputContainer, VideoStream] | None = None  # the H.264 writer, once open
+        self._cv: cv2.VideoWriter | None = None  # the mp4v writer, once open
         self._size: tuple[int, int] | None = None
 
     def _open(self, w: int, h: int) -> None:
@@ -54,41 +59,44 @@ class VideoWriter:
 
             import av
 
-            self._out = av.open(str(self._tmp), mode="w", format="mp4", options={"movflags": "+faststart"})
+            out = av.open(str(self._tmp), mode="w", format="mp4", options={"movflags": "+faststart"})
             rate = Fraction(self.fps).limit_denominator(1000)
-            self._stream = self._out.add_stream("libx264", rate=rate, options={"crf": "23", "preset": "veryfast"})
-            self._stream.width, self._stream.height = self._size
-            self._stream.pix_fmt = "yuv420p"
+            stream = out.add_stream("libx264", rate=rate, options={"crf": "23", "preset": "veryfast"})
+            stream.width, stream.height = self._size
+            stream.pix_fmt = "yuv420p"
+            self._av = out, stream
         else:
-            self._out = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, self._size)
-            if not self._out.isOpened():
+            self._cv = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter.fourcc(*"mp4v"), self.fps, self._size)
+            if not self._cv.isOpened():
                 raise OSError(f"OpenCV cannot write mp4 video to {self.path} (no mp4v encoder in this build)")
 
     def write(self, bgr: np.ndarray) -> None:
-        if self._out is None:
+        if self._av is None and self._cv is None:
             self._open(bgr.shape[1], bgr.shape[0])
         assert self._size is not None
         frame = np.ascontiguousarray(bgr[:self._size[1], :self._size[0]])
-        if self.backend == H264:
+        if self._av is not None:
             import av
 
-            for packet in self._stream.encode(av.VideoFrame.from_ndarray(frame, format="bgr24")):
-                self._out.mux(packet)
-        else:
-            self._out.write(frame)
+            out, stream = self._av
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="bgr24")):
+                out.mux(packet)
+        elif self._cv is not None:
+            self._cv.write(frame)
         self.frames += 1
 
     def close(self) -> Path | None:
         """Finish the file and move it into place; returns its path (None when no frame was written)."""
-        if self._out is None:
-            return None
-        if self.backend == H264:
-            for packet in self._stream.encode():
-                self._out.mux(packet)
-            self._out.close()
+        if self._av is not None:
+            out, stream = self._av
+            for packet in stream.encode():
+                out.mux(packet)
+            out.close()
+        elif self._cv is not None:
+            self._cv.release()
         else:
-            self._out.release()
-        self._out = None
+            return None
+        self._av = self._cv = None
         os.replace(self._tmp, self.path)
         return self.path
 

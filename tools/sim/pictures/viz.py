@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,7 +50,7 @@ class _View:
     scale: float  # px per metre
     pad: int
 
-    def px(self, xy: np.ndarray) -> np.ndarray:
+    def px(self, xy: np.ndarray | Sequence[float]) -> np.ndarray:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         return np.stack([(xy[:, 0] - self.x0) * self.scale + self.pad,
                          (self.y1 - xy[:, 1]) * self.scale + self.pad], 1)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -34,6 +35,10 @@ def focal_px() -> float:
     return real.focal_px(FRAME_HEIGHT, VFOV_DEG)
 
 
+@overload
+def fog_weight(dist: np.ndarray, density: float = 1.0) -> np.ndarray: ...
+@overload
+def fog_weight(dist: float, density: float = 1.0) -> float: ...
 def fog_weight(dist: np.ndarray | float, density: float = 1.0) -> np.ndarray | float:
     """Share of the haze colour at ``dist`` metres (``density``: the track's haze factor)."""
     if density == 1.0:

@@ -86,7 +86,7 @@ class Renderer:
         except KeyError:
             raise ValueError(f"unknown camera {camera!r}; expected one of {sorted(self.cameras)}") from None
         m = cam.model
-        fb = self._fb
+        fb: np.ndarray = self._fb
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         hr = m.horizon_row
 

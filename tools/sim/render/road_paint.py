@@ -71,7 +71,7 @@ def surface_runs(kinds: np.ndarray, spacing: float, length: float) -> list[tuple
     change = np.nonzero(kinds != np.roll(kinds, 1))[0]
     if len(change) == 0:
         return [(0.0, length, SURFACE_KINDS[int(kinds[0])])]
-    out = []
+    out: list[tuple[float, float, str]] = []
     for a, b in zip(change, np.r_[change[1:], change[0] + n], strict=True):
         out.append((a * spacing, b * spacing, SURFACE_KINDS[int(kinds[a])]))
     return out
@@ -184,7 +184,7 @@ def _paint_kerbs(p: Painter, track: Track, runs: list, half: float, pal: dict) -
         sharp = (sgn * track.curvature > 1.0 / KERB_RADIUS) & asphalt
         for a, b in curve_runs(sharp, track.spacing, pad=4.0):
             lo, hi = sorted((sgn * (half - LINE_INSET), sgn * (half + KERB_W)))
-            stripes = [[], []]
+            stripes: list[list[np.ndarray]] = [[], []]
             for k, c in enumerate(np.arange(a, b, KERB_STRIPE)):
                 stripes[k % 2] += p.band(c, c + KERB_STRIPE, lo, hi)
             p.fill(stripes[0], pal["kerb_red"])

@@ -129,6 +129,6 @@ def paint_ground(track: Track, seed: int | None = None) -> GroundAlbedo:
     tile = np.clip(tile + 32, 0, 64).astype(np.uint8)
     grain = cv2.repeat(tile, h // 512 + 1, w // 512 + 1)[:h, :w]
     img = cv2.addWeighted(img, 1.0, grain, look.grain, -32.0 * look.grain)
-    mean_rgb = tuple(int(v) for v in np.clip(mean, 0, 255))
-    return GroundAlbedo(rgb=img, x0=x0, y1=y1, res=res, mean_rgb=mean_rgb, water=water)
+    red, green, blue = (int(v) for v in np.clip(mean, 0, 255))
+    return GroundAlbedo(rgb=img, x0=x0, y1=y1, res=res, mean_rgb=(red, green, blue), water=water)
 

@@ -186,7 +186,8 @@ def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direc
     for _ in range(MIP_LEVELS - 1):
         mips.append(cv2.pyrDown(mips[-1]))
     bright = ambient + direct
-    border = tuple(int(min(255, round(c * bright))) for c in albedo.mean_rgb) + (int(round(255 * direct / bright)),)
+    red, green, blue = (int(min(255, round(c * bright))) for c in albedo.mean_rgb)
+    border = (red, green, blue, int(round(255 * direct / bright)))
     return LitGround(mips=tuple(mips), x0=albedo.x0, y1=albedo.y1, res=albedo.res, border=border)
 
 

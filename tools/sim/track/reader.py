@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import NoReturn
 
 from tools.sim.track.road import TrackError
 
@@ -13,7 +14,7 @@ class Reader:
     def __init__(self, source: str) -> None:
         self.source = source
 
-    def fail(self, problem: str):
+    def fail(self, problem: str) -> NoReturn:
         raise TrackError(f"{self.source}: {problem}")
 
     def number(self, obj: dict, key: str, default: float | None = None, *, lo: float = -math.inf,

@@ -166,7 +166,7 @@ class Track:
         if hint_s is None:
             i = int(np.argmin(((self.centerline - p) ** 2).sum(1)))
         # refine on the segment before or after the closest sample
-        best = None
+        best: tuple[float, int, int, float, np.ndarray] | None = None
         for a in ((i - 1) % n, i):
             b = (a + 1) % n
             seg = self.centerline[b] - self.centerline[a]
@@ -175,6 +175,7 @@ class Track:
             d2 = float(((p - q) ** 2).sum())
             if best is None or d2 < best[0]:
                 best = (d2, a, b, f, q)
+        assert best is not None  # the loop above runs twice
         _, a, b, f, q = best
         t = self.tangents[a] * (1 - f) + self.tangents[b] * f
         t /= np.linalg.norm(t)

@@ -89,7 +89,8 @@ def _ellipse_ok(lay: Layout, centre, radius, angle_deg: float, keep_off: float, 
 
 def water(rng: np.random.Generator, lay: Layout, theme: str, keep_off: float, half_deck: float):
     """Ponds beside the road and at most one crossed by a bridge: (water specs, bridge surfaces)."""
-    ponds, bridges = [], []
+    ponds: list[dict[str, object]] = []
+    bridges = []
     length = len(lay.points) * DS
     n_side = int(rng.integers(2, 6)) if theme == "wetland" else int(rng.choice([0, 0, 1, 2]))
     for _ in range(n_side * 4):  # a few tries each

@@ -73,7 +73,8 @@ def _pieces(rng: np.random.Generator, cfg: WorldGenConfig, hairpin_r: float) -> 
 
 def _profile(pieces: list) -> tuple[np.ndarray, list[tuple[int, int]]]:
     """Smoothed curvature per DS sample, scaled to one full turn; sample ranges of the straights."""
-    kappa, straights = [], []
+    kappa: list[float] = []
+    straights: list[tuple[int, int]] = []
     for length, k, straight in pieces:
         m = max(1, int(round(length / DS)))
         if straight:
