@@ -217,7 +217,12 @@ def _road(args: argparse.Namespace) -> int:
         raise CommandError("no recording to measure", "name recording folders, or --public ROOT for the public ones")
     for folder in dirs:
         log = recorded_drive(read_log(folder)[0], args.speed_unit)
-        _, _, road = car_and_road(log, bars=lambda _, name=folder.name: Progress(f"road {name}", unit="frame"))
+
+        def road_bar(_phase: str, name: str = folder.name) -> Progress:
+            return Progress(f"road {name}", unit="frame")
+
+        _, _, road = car_and_road(log, bars=road_bar)
+        assert road is not None  # car_and_road(road=True), the default, always returns the edges
         out = write_road_file(Path(folder) / ROAD_FILE, log.frames, road.left_m, road.right_m, road.measured)
         print(f"{folder}: {road.describe()} -> {out}")
     return 0
@@ -299,6 +304,7 @@ def _fetch(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     if failed:
-        name, exc = failed[0]
-        raise CommandError(f"{len(failed)} of {len(chosen)} recordings not fetched; first: {name}: {exc}", exc.hint)
+        name, error = failed[0]
+        raise CommandError(f"{len(failed)} of {len(chosen)} recordings not fetched; first: {name}: {error}",
+                           error.hint)
     return 0

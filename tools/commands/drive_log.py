@@ -163,7 +163,8 @@ def _calibrate(samples: list, rows: int) -> int:
     print(f"\nthe centre frame re-projected to each side camera's place against its real frame, {len(rows_by_slope)} "
           "rows: correlation of the road rows (as it is / over flat ground / over the ground at the pitch the other "
           "side measured), by how steep the ground ahead is (its pitch off the camera's)")
-    for b in reprojection_by_slope([(s.center, s.left, s.right) for s in rows_by_slope]):
+    for b in reprojection_by_slope([(s.center, s.left, s.right) for s in rows_by_slope  # rows with sides only
+                                    if s.left is not None and s.right is not None]):
         print(f"  {b.low_deg:g}-{b.high_deg:g} deg: {b.frames:>4} rows  "
               f"{b.unmoved:.3f} / {b.flat:.3f} / {b.pitched:.3f}")
     return 0

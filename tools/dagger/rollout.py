@@ -24,6 +24,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -36,6 +37,9 @@ from protocol.units import from_kmh
 from tools.dagger.config import STREAM_EPISODES, STREAM_MIX, DaggerConfig
 from tools.sim.collect.dataset import EPOCH
 from tools.sim.worldgen import world_seed_range
+
+if TYPE_CHECKING:
+    from tools.envs.drive_env import DriveEnv
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +116,7 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
                            cameras=config.cameras, camera=config.camera, speed_limit_kmh=config.speed_limit_kmh,
                            action_delay=config.action_delay, max_episode_steps=config.episode_steps,
                            terminate_on_takeover=False, disable_env_checker=True)
+            drive = cast("DriveEnv", env.unwrapped)  # what gym.make builds for ENV_ID
             try:
                 obs, info = env.reset(seed=episode.reset_seed)
                 for step in range(config.episode_steps):
@@ -120,10 +125,10 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
                     expert = float(info["expert_action"][0])
                     learned = policy.steering(obs["center"] if config.cameras == 3 else obs, info) if policy else None
                     by_expert = policy is None or bool(mix.random() < beta)
-                    when = start + dt.timedelta(seconds=round(clock + step / env.unwrapped.config.control_hz, 3))
+                    when = start + dt.timedelta(seconds=round(clock + step / drive.config.control_hz, 3))
                     paths = _write_frames(partial / IMAGE_DIR, cameras, when, obs, info)
                     action = np.array([expert if by_expert else learned], np.float32)
-                    command = env.unwrapped.command(action)
+                    command = drive.command(action)
                     writer.write([str(final / IMAGE_DIR / p.name) for p in paths], expert, max(0.0, command.throttle),
                                  max(0.0, -command.throttle), from_kmh(info["speed_kmh"], "mph"))
                     obs, _, _, truncated, info = env.step(action)
@@ -140,7 +145,7 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
                         break
             finally:
                 env.close()
-            clock += config.episode_steps / env.unwrapped.config.control_hz + 10.0  # a pause: a new session
+            clock += config.episode_steps / drive.config.control_hz + 10.0  # a pause: a new session
             stats.episodes += 1
             stats.world_seeds += (episode.world_seed,)
             if progress is not None:
@@ -178,5 +183,5 @@ def read_stats(folder: Path) -> CollectionStats:
     from drive_server.runrecords import read_json
 
     data = read_json(folder / SUMMARY)
-    return CollectionStats(**{k: (tuple(v) if k == "world_seeds" else v) for k, v in data.items()
-                              if k in CollectionStats.__dataclass_fields__})
+    known = {k: v for k, v in data.items() if k in CollectionStats.__dataclass_fields__ and k != "world_seeds"}
+    return CollectionStats(**known, world_seeds=tuple(data.get("world_seeds", ())))

@@ -144,7 +144,7 @@ class TrackFollower:
             self.i = int(round(p.s / self.track.spacing)) % n
             return p
         self.i = i
-        best = None
+        best: tuple[float, int, int, float, float, float] | None = None
         for a in ((i - 1) % n, i):
             b = (a + 1) % n
             sx, sy = self._x[b] - self._x[a], self._y[b] - self._y[a]
@@ -154,6 +154,7 @@ class TrackFollower:
             d2 = (x - qx) ** 2 + (y - qy) ** 2
             if best is None or d2 < best[0]:
                 best = (d2, a, b, f, qx, qy)
+        assert best is not None  # the loop above runs twice
         _, a, b, f, qx, qy = best
         tx = self._tx[a] * (1 - f) + self._tx[b] * f
         ty = self._ty[a] * (1 - f) + self._ty[b] * f
