@@ -14,7 +14,15 @@ import numpy as np
 
 from drive_server.control import ControlLaw
 from drive_server.model import SteeringModel
-from drive_server.monitor import ClientMonitor, Level, MonitorPolicy, MonitorReading, act_on
+from drive_server.monitor import (
+    ClientMonitor,
+    Level,
+    MonitorGraph,
+    MonitorPolicy,
+    MonitorReading,
+    MonitorSpec,
+    act_on,
+)
 from drive_server.preprocess import jpeg_reduction, preprocess
 from drive_server.smoothing import OFF, SteeringSmoother, check_alpha
 from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
@@ -58,7 +66,8 @@ class DrivePipeline:
         self.smooth = model.smooth if config.smooth is None else config.smooth
         self._slow_laws: dict[float, ControlLaw] = {}
         found = model.monitor() if config.monitor.mode != "off" else None
-        self.monitor_spec, self._monitor_graph = found if found is not None else (None, None)
+        self.monitor_spec: MonitorSpec | None = found[0] if found is not None else None
+        self._monitor_graph: MonitorGraph | None = found[1] if found is not None else None
 
     def client_monitor(self, who: str = "") -> ClientMonitor | None:
         """A new client's monitor state (None: the model carries no monitor, or it is off)."""

@@ -102,3 +102,35 @@ def test_a_tiny_benchmark_drives_scores_resumes_and_records(tmp_path):
     assert "ours: brightness" in text and "SelfOracle" in text
     warn = {s.name: r for s, m, r in results if m == "warn"}
     assert warn["nominal-0"]["takeovers"], "a random model should leave the road"
+
+
+def test_a_failure_in_a_nominal_run_counts_and_its_warning_is_no_false_alarm():
+    nominal = _trace("n", "nominal", 600, alarm_spans=[(297, 300)], takeovers=[(300.0, "off_road")])
+    f = score([nominal], RULES)
+    assert f.misbehaviours == 1 and f.recall_at["1"] == 1
+    assert f.false_windows == 0 and f.false_episodes == 0
+
+
+@pytest.mark.slow
+def test_rbc_sim_sums_up_the_monitor_and_draws_its_score(tmp_path):
+    from conftest import write_stadium
+    from helpers_server import build_shallow
+    from test_monitor import _brightness_graph, _with_monitor
+
+    from drive_server.monitor import MonitorSpec
+    from tools.cli import main
+
+    model = _with_monitor(build_shallow(tmp_path / "m.onnx", seed=3), tmp_path / "mon.onnx",
+                          MonitorSpec("brightness", -0.2, 0.5, 15), _brightness_graph())
+    track = write_stadium(tmp_path, straight=40.0, radius=20.0)
+    plot = tmp_path / "score.png"
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["sim", "--model", str(model), "--track", track, "--max-lap-time", "40",
+                     "--monitor-plot", str(plot)]) == 0
+    text = out.getvalue()
+    assert "monitor brightness (warn): 1 warning(s), 0 alarm(s)" in text and "foreseen:" in text
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -52,6 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ev.add_argument("--per-setting", type=int, default=EvalPlan.per_setting,
                     help="runs per perturbation intensity and per degraded model (default %(default)s)")
     ev.add_argument("--no-act", dest="act", action="store_false", help="skip the closed-loop runs with act")
+    ev.add_argument("--workers", type=int, default=EvalPlan.workers,
+                    help="processes driving runs side by side (default %(default)s)")
     ev.add_argument("--cost-log", type=Path, default=None, metavar="DIR",
                     help="recorded frames to time the server's pipeline on, monitor off and on (default: the "
                          "bundled test recording when present)")
@@ -78,7 +80,7 @@ def _eval(args: argparse.Namespace) -> int:
         sample = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
         cost_log = sample if sample.is_dir() else None
     plan = EvalPlan(args.model, args.out, nominal=args.nominal, per_setting=args.per_setting, act=args.act,
-                    cost_log=cost_log)
+                    cost_log=cost_log, workers=args.workers)
     import logging
 
     if not logging.getLogger().isEnabledFor(logging.DEBUG):  # hundreds of runs: their state changes only with -v

@@ -27,6 +27,7 @@ class EvalPlan:
     per_setting: int = 6  # runs of each perturbation intensity and each degraded model
     act: bool = True  # also drive every run with --monitor act
     cost_log: Path | None = None  # recorded frames to time the server's pipeline on
+    workers: int = 1  # processes driving runs side by side
     rules: ScoringRules = field(default_factory=ScoringRules)
 
     def specs(self) -> list[RunSpec]:
@@ -48,7 +49,7 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
         raise BadValue(f"{plan.model.name} carries no monitor (attach one with rbc monitor fit)")
     spec = found[0]
     modes = ("warn", "act") if plan.act else ("warn",)
-    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress)
+    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress, plan.workers)
     record: dict[str, Any] = {
         "model": plan.model.name, "model_sha256": file_digest(plan.model),
         "monitor": {"score": spec.score, "warn": spec.warn, "alarm": spec.alarm, "window": spec.window,

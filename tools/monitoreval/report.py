@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import statistics
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -12,15 +13,26 @@ import numpy as np
 from tools.monitoreval.runset import RunSpec
 from tools.monitoreval.scoring import MISBEHAVIOUR_CAUSES, RunTrace, ScoringRules, score
 
-#: Published figures (recall at the 1, 2, 3 s slices; F3), Grewal, Tonella & Stocco, ICST 2024, Table 3.
-ANCHORS = [
-    {"monitor": "deep ensemble, 5 models", "recall_1": 1.00, "recall_2": 1.00, "recall_3": 0.98, "f3": None},
-    {"monitor": "MC-dropout", "recall_1": 0.97, "recall_2": 0.96, "recall_3": 0.93, "f3": None},
-    {"monitor": "SelfOracle (autoencoder)", "recall_1": 0.87, "recall_2": 0.77, "recall_3": 0.66, "f3": None},
-    {"monitor": "ThirdEye (attention)", "recall_1": 0.78, "recall_2": 0.79, "recall_3": 0.71, "f3": None},
-    {"monitor": "best of the study (50-model ensemble)", "recall_1": None, "recall_2": None, "recall_3": None,
-     "f3": 0.94},
-]
+
+@dataclass(frozen=True)
+class Anchor:
+    """A published monitor's figures: recall at the 1, 2, 3 s slices, F3 (None: not reported)."""
+
+    monitor: str
+    recall_1: float | None
+    recall_2: float | None
+    recall_3: float | None
+    f3: float | None = None
+
+
+#: Grewal, Tonella & Stocco, ICST 2024 (arXiv 2404.18573): recall at the 1, 2, 3 s slices; best F3.
+ANCHORS = (
+    Anchor("deep ensemble, 5 models", 1.00, 1.00, 0.98),
+    Anchor("MC-dropout", 0.97, 0.96, 0.93),
+    Anchor("SelfOracle (autoencoder)", 0.87, 0.77, 0.66),
+    Anchor("ThirdEye (attention)", 0.78, 0.79, 0.71),
+    Anchor("best of the study (50-model ensemble)", None, None, None, 0.94),
+)
 
 
 def trace(spec: RunSpec, run: dict[str, Any]) -> RunTrace:
@@ -87,8 +99,8 @@ def tables(record: dict[str, Any]) -> str:
              f"| ours: {record['monitor']['score']} | {_pct(f['recall_at']['1'])} | {_pct(f['recall_at']['2'])} | "
              f"{_pct(f['recall_at']['3'])} | {_pct(f['recall_4_6'])} | {f['f3_1_3']:.3f} |"]
     for a in ANCHORS:
-        lines.append(f"| {a['monitor']} (published) | {_pct(a['recall_1'])} | {_pct(a['recall_2'])} | "
-                     f"{_pct(a['recall_3'])} | - | {a['f3'] if a['f3'] is not None else '-'} |")
+        lines.append(f"| {a.monitor} (published) | {_pct(a.recall_1)} | {_pct(a.recall_2)} | {_pct(a.recall_3)} | - | "
+                     f"{a.f3 if a.f3 is not None else '-'} |")
     lead, p10 = f["lead_median_s"], f["lead_p10_s"]
     lines += ["", f"{f['misbehaviours']} misbehaviours ({f['undetectable']['3']} with too little history for the 3 s "
               f"slice, counted as misses); {f['nominal_windows']:,} nominal one-second windows, "

@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,23 +121,51 @@ class Journal:
 
 
 def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Path,
-              progress: Callable[[int, int, str], None] | None = None) -> list[tuple[RunSpec, str, dict[str, Any]]]:
-    """Every spec in every mode, resuming from ``out``'s journal; (spec, mode, run) in a fixed order."""
+              progress: Callable[[int, int, str], None] | None = None,
+              workers: int = 1) -> list[tuple[RunSpec, str, dict[str, Any]]]:
+    """Every spec in every mode, resuming from ``out``'s journal; (spec, mode, run) in a fixed order whatever
+    ``workers`` (processes driving runs side by side; each run is deterministic, so the order of finishing
+    changes nothing but the journal's line order)."""
+    import concurrent.futures
+    import multiprocessing
+
     journal = Journal(out / JOURNAL)
     code = code_digest(*RUN_CODE)
     models = out / "models"
-    results, total, done = [], len(specs) * len(modes), 0
+    todo: dict[str, tuple[RunSpec, Path, str]] = {}
+    order = []
     for spec in specs:
         path = degraded_model(model, models, spec.weight_noise, spec.seed) if spec.weight_noise else model
         digest = file_digest(path)
         for mode in modes:
             key = RunKey(spec, mode, digest, code).text()
-            run = journal.done.get(key)
-            if run is None:
-                run = drive(spec, path, mode)
-                journal.add(key, run)
-            results.append((spec, mode, run))
-            done += 1
-            if progress is not None:
-                progress(done, total, f"{spec.name} ({mode})")
-    return results
+            order.append((spec, mode, key))
+            if key not in journal.done:
+                todo[key] = (spec, path, mode)
+    total, done = len(order), len(order) - len(todo)
+    if progress is not None and done:
+        progress(done, total, "from the journal")
+
+    def finished(key: str, run: dict[str, Any]) -> None:
+        nonlocal done
+        journal.add(key, run)
+        done += 1
+        if progress is not None:
+            spec, _, mode = todo[key]
+            progress(done, total, f"{spec.name} ({mode})")
+
+    if workers <= 1 or len(todo) <= 1:
+        for key, (spec, path, mode) in todo.items():
+            finished(key, drive(spec, path, mode))
+    else:
+        context = multiprocessing.get_context("fork" if hasattr(os, "fork") else "spawn")
+        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
+            futures = {pool.submit(drive, spec, path, mode): key for key, (spec, path, mode) in todo.items()}
+            try:
+                for future in concurrent.futures.as_completed(futures):
+                    finished(futures[future], future.result())
+            except KeyboardInterrupt:
+                for future in futures:
+                    future.cancel()
+                raise
+    return [(spec, mode, journal.done[key]) for spec, mode, key in order]

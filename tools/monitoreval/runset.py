@@ -69,18 +69,15 @@ def failing_runs(per_setting: int) -> list[RunSpec]:
         for value in values:
             for k in range(per_setting):
                 world = f"world:{NOMINAL_WORLDS[(k * 7) % len(NOMINAL_WORLDS)]}" if k % 2 else "lake"
-                base = dict(name=f"{axis}{value:g}-{k}", group="perturbed", axis=axis, intensity=value, track=world,
-                            seed=100 + k)
-                if axis == "light":
-                    out.append(RunSpec(**base, light_intensity=value))
-                elif axis == "sun":
-                    out.append(RunSpec(**base, light_direction_deg=value))
-                elif axis == "yaw":
-                    out.append(RunSpec(**base, yaw_offset_deg=value))
-                elif axis == "cones":
-                    out.append(RunSpec(**{**base, "track": "lake"}, cones=int(value)))
-                else:
-                    out.append(RunSpec(**{**base, "track": f"world:{UNSEEN_WORLDS_FIRST + k}"}))
+                if axis == "cones":
+                    world = "lake"
+                elif axis == "unseen_world":
+                    world = f"world:{UNSEEN_WORLDS_FIRST + k}"
+                out.append(RunSpec(f"{axis}{value:g}-{k}", "perturbed", axis, value, world, seed=100 + k,
+                                   light_intensity=value if axis == "light" else 1.0,
+                                   light_direction_deg=value if axis == "sun" else 0.0,
+                                   yaw_offset_deg=value if axis == "yaw" else 0.0,
+                                   cones=int(value) if axis == "cones" else 0))
     for sigma in WEIGHT_NOISE:
         for k in range(per_setting):
             track = "lake" if k % 2 == 0 else f"world:{NOMINAL_WORLDS[(k * 11) % len(NOMINAL_WORLDS)]}"

@@ -1,13 +1,14 @@
 """How a monitor is scored: the rules as data, the figures as small records (the CARLA leaderboard's way).
 
 A misbehaviour is the first frame of a referee take-over for leaving the road, a cone or a spin-out (stuck and
-wrong-way are counted apart); one within ``settle_s`` of the run's start or of the previous take-over is not a
-failure of its own and is left out, and one with less history than a slice needs is counted as undetectable
-(a miss), never dropped.
+wrong-way are counted apart), in any run, nominal ones included; one within ``settle_s`` of the run's start or of
+the previous take-over is not a failure of its own and is left out, and one with less history than a slice needs
+is counted as undetectable (a miss), never dropped.
 
 Two protocols. The anchors' (SelfOracle, ThirdEye, the ICST 2024 uncertainty study): a misbehaviour is
 detected "at k s" if the monitor is in warning or alarm at some frame of the one-second slice [T-k-1, T-k);
-false positives are the one-second windows of held-out nominal driving with a warning in them. Ours, for
+false positives are the one-second windows of held-out nominal driving with a warning in them (none of the 10 s
+before a take-over: a warning there foresaw a real failure). Ours, for
 deployment: debounced episodes (the server's own state machine), the lead of the first episode before each
 misbehaviour, and false alarm episodes per hour of held-out nominal driving with a 95 % upper bound.
 """
@@ -35,6 +36,10 @@ class ScoringRules:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+#: The rules every benchmark uses unless told otherwise.
+DEFAULT_RULES = ScoringRules()
 
 
 @dataclass
@@ -71,6 +76,23 @@ def episodes(run: RunTrace, rules: ScoringRules) -> np.ndarray:
     return run.t[starts]
 
 
+def first_warning_leads(run: RunTrace, rules: ScoringRules) -> list[tuple[float, str, float | None]]:
+    """(time, cause, lead) of each misbehaviour: how long before it the first prediction episode within the
+    horizon began (the whole horizon for one in force since earlier still), None if none."""
+    out: list[tuple[float, str, float | None]] = []
+    starts = episodes(run, rules)
+    for when, cause, history in misbehaviours(run, rules):
+        before = starts[(starts > when - rules.horizon_s) & (starts <= when) & (starts >= history - rules.settle_s)]
+        window = (run.t >= max(history, when - rules.horizon_s)) & (run.t < when)
+        if before.size:
+            out.append((when, cause, when - float(before[0])))
+        elif np.any(run.level[window] >= rules.level):
+            out.append((when, cause, rules.horizon_s))
+        else:
+            out.append((when, cause, None))
+    return out
+
+
 def _slice_hit(run: RunTrace, when: float, k: int, history: float, rules: ScoringRules) -> bool | None:
     lo, hi = when - k - 1, when - k
     if lo < history:
@@ -80,12 +102,14 @@ def _slice_hit(run: RunTrace, when: float, k: int, history: float, rules: Scorin
 
 
 def nominal_windows(run: RunTrace, rules: ScoringRules) -> tuple[int, int]:
-    """(one-second windows, windows with a prediction) of a nominal run, settled stretches only."""
+    """(one-second windows, windows with a prediction) of a nominal run: settled stretches only, and none of the
+    ``horizon_s`` before a take-over (a warning there foresaw a real failure: not a false alarm)."""
     total = hit = 0
     bounds = [0.0, *[w for w, _ in run.takeovers], run.sim_time_s]
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         start = a + rules.settle_s
-        for lo in np.arange(start, b - 1.0 + 1e-9, 1.0):
+        end = b - rules.horizon_s if k < len(run.takeovers) else b
+        for lo in np.arange(start, end - 1.0 + 1e-9, 1.0):
             inside = (run.t >= lo) & (run.t < lo + 1.0)
             total += 1
             hit += bool(np.any(run.level[inside] >= rules.level))
@@ -144,12 +168,11 @@ class Figures:
         return asdict(self)
 
 
-def score(runs: Sequence[RunTrace], rules: ScoringRules = ScoringRules()) -> Figures:
-    failing = [r for r in runs if r.group != "nominal"]
+def score(runs: Sequence[RunTrace], rules: ScoringRules = DEFAULT_RULES) -> Figures:
     nominal = [r for r in runs if r.group == "nominal"]
-    found = [(r, m) for r in failing for m in misbehaviours(r, rules)]
+    found = [(r, m) for r in runs for m in misbehaviours(r, rules)]  # a nominal run's failure is a failure too
     others: dict[str, int] = {}
-    for r in failing:
+    for r in runs:
         for _, cause in r.takeovers:
             if cause not in MISBEHAVIOUR_CAUSES:
                 others[cause] = others.get(cause, 0) + 1
@@ -171,27 +194,20 @@ def score(runs: Sequence[RunTrace], rules: ScoringRules = ScoringRules()) -> Fig
     tp13 = sum(within)
     p13, r13 = precision(tp13), (tp13 / n if n else 0.0)
     # deployment: leads of the first episode within the horizon before each misbehaviour
-    leads = []
-    for r, (when, _, hist) in found:
-        starts = episodes(r, rules)
-        before = starts[(starts > when - rules.horizon_s) & (starts <= when) & (starts >= hist - rules.settle_s)]
-        ongoing = bool(np.any(r.level[(r.t >= max(hist, when - rules.horizon_s)) & (r.t < when)] >= rules.level))
-        if before.size:
-            leads.append(when - float(before[0]))
-        elif ongoing:  # in a prediction episode that started earlier still: the lead is the whole horizon
-            leads.append(rules.horizon_s)
-        else:
-            leads.append(None)
+    leads = [lead for r in runs for *_, lead in first_warning_leads(r, rules)]
     lead_recall = {str(k): (sum(1 for x in leads if x is not None and x >= k) / n if n else 0.0) for k in (1, 2, 3)}
     got = np.array([x for x in leads if x is not None])
     all_eps, useful = 0, 0
     for r in runs:
         starts = episodes(r, rules)
         all_eps += len(starts)
-        fails = np.array([m[0] for m in misbehaviours(r, rules)]) if r.group != "nominal" else np.zeros(0)
+        fails = np.array([m[0] for m in misbehaviours(r, rules)])
         useful += sum(bool(np.any((fails >= s) & (fails - s <= rules.horizon_s))) for s in starts)
     hours = sum(r.sim_time_s for r in nominal) / 3600.0
-    false_eps = sum(len(episodes(r, rules)) for r in nominal)
+    false_eps = 0  # nominal episodes that foresaw no failure
+    for r in nominal:
+        fails = np.array([m[0] for m in misbehaviours(r, rules)])
+        false_eps += sum(not np.any((fails >= s) & (fails - s <= rules.horizon_s)) for s in episodes(r, rules))
     return Figures(
         misbehaviours=n, undetectable=undetectable, other_takeovers=others, recall_at=recall,
         recall_4_6=(sum(early) / n if n else 0.0), nominal_windows=total_w, false_windows=false_w,

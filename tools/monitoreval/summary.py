@@ -1,0 +1,40 @@
+"""One run's monitor in words (``rbc sim``): its episodes, and which take-overs it foresaw and how early."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from tools.monitoreval.scoring import (
+    DEFAULT_RULES,
+    MISBEHAVIOUR_CAUSES,
+    RunTrace,
+    ScoringRules,
+    first_warning_leads,
+)
+
+
+def run_trace(driver: Any, result: Any, name: str = "run", group: str = "perturbed") -> RunTrace:
+    t = np.array([when for when, _ in driver.readings], dtype=np.float64)
+    level = np.array([int(r.level) if r is not None else 0 for _, r in driver.readings], dtype=np.uint8)
+    takeovers = [(i.t, str(i.cause)) for lap in result.laps for i in lap.interventions]
+    return RunTrace(name, group, t, level, takeovers, result.sim_time_s)
+
+
+def monitor_summary(driver: Any, result: Any, rules: ScoringRules = DEFAULT_RULES) -> str:
+    spec, state = driver.monitor.state.spec, driver.monitor.state
+    trace = run_trace(driver, result)
+    found = first_warning_leads(trace, rules)
+    foreseen = [x for x in found if x[2] is not None]
+    text = (f"monitor {spec.score} ({driver.pipeline.config.monitor.mode.value}): {state.episodes['warning']} "
+            f"warning(s), {state.episodes['alarm']} alarm(s); take-overs for leaving the road, a cone or a spin-out "
+            f"foreseen: {len(foreseen)} of {len(found)}")
+    if foreseen:
+        text += " (lead " + ", ".join(f"{lead:.1f} s" for *_, lead in foreseen) + ")"
+    if driver.monitor.failed:
+        text += f"; switched off: {driver.monitor.failed}"
+    skipped = sum(1 for _, c in trace.takeovers if c in MISBEHAVIOUR_CAUSES) - len(found)
+    if skipped:
+        text += f"; {skipped} more within {rules.settle_s:g} s of the previous take-over"
+    return text
