@@ -127,25 +127,84 @@ def test_a_retrained_model_at_the_same_path_is_scored_again(tmp_path: Path) -> N
     assert key != crossval.score_key("folds", "one", MODEL, False, None, None)
     same = crossval.score_key("folds", "one", MODEL, True, None, None, code="git abc")
     assert same != crossval.score_key("folds", "one", MODEL, True, None, None, code="git abd")  # the measure changed
+    assert same != crossval.score_key("folds", "one", MODEL, True, None, None, code="git abc", data="d")  # re-cut
 
 
-def test_the_journal_keeps_across_changes_outside_the_measuring_code(tmp_path: Path) -> None:
-    """A commit to the docs or the training code must not void a cross-validation spread over sittings; a change
-    to the closed loop, the server's pipeline or the frame format must."""
+def test_the_journal_key_covers_the_code_the_scorer_imports_and_nothing_else(tmp_path: Path) -> None:
+    """The offline scorer, the labels, the metrics and eta's rules are the scorer's code as much as the closed loop:
+    a change to any of them voids a journal; a change to the docs or to training code the scorer never runs does
+    not."""
+    from tests.scratch_code import STUBS, edit, write_tree
     from tools.realdata import crossval
 
-    for folder in (*crossval.MEASURE_CODE, "docs", "models"):
-        (tmp_path / folder).mkdir(parents=True, exist_ok=True)
-        (tmp_path / folder / "a.py").write_text("x = 1\n")
-    version = crossval.measure_version(tmp_path)
-    (tmp_path / "models" / "a.py").write_text("x = 2\n")
-    (tmp_path / "docs" / "b.md").write_text("new page\n")
-    assert crossval.measure_version(tmp_path) == version
-    for folder in crossval.MEASURE_CODE:
-        (tmp_path / folder / "a.py").write_text(f"x = '{folder}'\n")
-        assert crossval.measure_version(tmp_path) != version
-        version = crossval.measure_version(tmp_path)
+    root = write_tree(tmp_path)
+    version = crossval.measure_version(root)
+    for name in ("models/training/train.py", "tools/console.py", "docs/page.md"):
+        edit(root, name, "CHANGED = 1\n")
+        assert crossval.measure_version(root) == version, name
+    for name in ("tools/evaluate/offline.py", "models/data/labels.py", "models/training/metrics.py",
+                 "tools/sim/driving/rules.py", "drive_server/pipeline.py", "tools/realdata/public_recordings.csv"):
+        edit(root, name, STUBS[name] + "\nCHANGED = 1\n")
+        assert crossval.measure_version(root) != version, name
+        version = crossval.measure_version(root)
     assert crossval.measure_version() == crossval.measure_version()  # the checkout's own, stable
+
+
+def test_a_resumed_crossval_scores_again_what_a_change_of_code_data_or_settings_touched(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from tests.scratch_code import STUBS, edit, write_tree
+    from tools.realdata import crossval
+
+    code = write_tree(tmp_path / "code")
+    monkeypatch.setattr(crossval, "CODE_ROOT", code, raising=False)  # its code read from the scratch tree
+    root, recs = _two_recordings(tmp_path)
+    scored: list[str] = []
+
+    def fake(rec, root, model, closed_loop, rules, smooth):
+        scored.append(rec.name)
+        return RecordingScore(rec.name, rec.track, rec.fold, str(model), 1, 0.1, 0.05, 0.5)
+
+    monkeypatch.setattr(crossval, "score_recording", fake)
+    path = tmp_path / "cv.journal.jsonl"
+
+    def again(**settings) -> list[str]:
+        scored.clear()
+        crossval.score_all(recs, root, str(MODEL), journal=crossval.ScoreJournal(path), **settings)
+        return sorted(scored)
+
+    assert again() == ["one", "two"]
+    assert again() == []  # all in the journal
+    edit(code, "models/training/metrics.py", STUBS["models/training/metrics.py"] + "\nCHANGED = 1\n")
+    assert again() == ["one", "two"]  # the scorer's code changed
+    log = root / "one" / "driving_log.csv"
+    log.write_text(log.read_text(encoding="utf-8").replace("0.", "1.", 1), encoding="utf-8")
+    assert again() == ["one"]  # one recording's data changed
+    assert again(smooth=0.5) == ["one", "two"]
+    assert again(closed_loop=False) == ["one", "two"]
+    assert again() == []
+
+
+def test_journal_lines_that_no_longer_load_are_counted_in_one_warning(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    from tools.realdata import crossval
+
+    score = RecordingScore("one", "lake", "A", "m", 1, 0.1, 0.05, 0.5)
+    key = crossval.score_key("folds", "one", MODEL, True, None, None, "code 1", "data 1")
+    old_key = json.dumps({k: v for k, v in json.loads(key).items() if k != "data"})  # before data was in the key
+    whole = json.dumps({"key": key, "score": score.as_dict()})
+    path = tmp_path / "cv.journal.jsonl"
+    path.write_text("\n".join([whole, "not json", json.dumps({"key": old_key, "score": score.as_dict()}),
+                               json.dumps({"key": key}), whole[:20]]), encoding="utf-8")
+    with caplog.at_level("WARNING", logger="tools.realdata.crossval"):
+        journal = crossval.ScoreJournal(path)
+    assert journal.get(key) == score and len(journal.scores) == 1
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warnings) == 1 and str(path) in warnings[0] and " 4 line" in warnings[0]
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="tools.realdata.crossval"):
+        path.write_text(whole + "\n", encoding="utf-8")
+        crossval.ScoreJournal(path)
+    assert not caplog.records  # a sound journal says nothing
 
 
 def test_the_command_writes_its_figures_and_resumes_to_the_same_json(tmp_path: Path) -> None:
@@ -209,12 +268,61 @@ def test_a_finished_fold_is_never_trained_again_and_an_interrupted_one_continues
 
     def fake_train(cfg, resume=False):
         calls.append(resume)
+        Path(cfg.out).mkdir(parents=True, exist_ok=True)
+        (Path(cfg.out) / "config.json").write_text("{}", encoding="utf-8")  # what a run a stop interrupted leaves
         return type("R", (), {"interrupted": True, "onnx": None})()
 
     monkeypatch.setattr(train_module, "train", fake_train)
     assert foldtrain.train_fold(str(recipe), "B", recs, root, runs) == model  # finished: not trained
     assert calls == []
-    (runs / "fold-A").mkdir()
-    (runs / "fold-A" / "config.json").write_text("{}", encoding="utf-8")  # a run a stop interrupted
+    assert foldtrain.train_fold(str(recipe), "A", recs, root, runs) is None  # stopped
     assert foldtrain.train_fold(str(recipe), "A", recs, root, runs) is None
-    assert calls == [True]  # continued from its checkpoint, not started afresh
+    assert calls == [False, True]  # continued from its checkpoint, not started afresh
+
+
+def test_a_fold_model_is_trained_again_when_its_recipe_data_or_code_changed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    import models.training.train as train_module
+    from tests.scratch_code import STUBS, edit, write_tree
+    from tools.realdata import foldtrain
+
+    code = write_tree(tmp_path / "code")
+    monkeypatch.setattr(foldtrain, "CODE_ROOT", code, raising=False)  # its code read from the scratch tree
+    root, recs = _two_recordings(tmp_path)
+    recipe = tmp_path / "tiny.toml"
+    recipe.write_text("[training]\nepochs = 1\n", encoding="utf-8")
+    runs = tmp_path / "runs"
+    trained: list[list[str]] = []
+
+    def fake_train(cfg, resume=False):  # a finished run, at once
+        trained.append(cfg.data)
+        out = Path(cfg.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "model.onnx").write_bytes(b"onnx")
+        (out / "config.json").write_text('{"result": {}}', encoding="utf-8")
+        return type("R", (), {"interrupted": False, "onnx": out / "model.onnx"})()
+
+    monkeypatch.setattr(train_module, "train", fake_train)
+
+    def trains() -> bool:
+        trained.clear()
+        foldtrain.train_fold(str(recipe), "B", recs, root, runs, progress=False)
+        return bool(trained)
+
+    assert trains() and not trains()
+    recipe.write_text("[training]\nepochs = 2\n", encoding="utf-8")
+    with caplog.at_level("WARNING", logger="tools.realdata.foldtrain"):
+        assert trains() and not trains()
+    assert (runs / "fold-B.stale" / "model.onnx").is_file() and "other settings" in caplog.text
+    log = root / "one" / "driving_log.csv"  # fold B's training data
+    log.write_text(log.read_text(encoding="utf-8").replace("0.", "1.", 1), encoding="utf-8")
+    assert trains() and not trains()
+    edit(code, "models/training/metrics.py", STUBS["models/training/metrics.py"] + "\nCHANGED = 1\n")
+    assert trains() and not trains()
+    edit(code, "docs/page.md", "not the training's code\n")
+    assert not trains()
+    (runs / "fold-B" / "fold.json").unlink()  # a run of the version before keys
+    assert trains() and not trains()
+    trained.clear()
+    foldtrain.train_fold(str(recipe), "B", recs, root, runs, progress=True)
+    assert trained == []  # a progress bar changes no model

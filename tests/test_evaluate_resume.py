@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 from concurrent.futures import Future
+from pathlib import Path
 
 import pytest
 
@@ -60,11 +61,40 @@ def test_resume_reuses_finished_runs_and_refuses_another_model(tmp_path, shallow
     assert len(rerun) == 4 and len({record_key(r) for r in rerun}) == 4
     assert "3 reused from the journal" in second.stdout
 
+    doc = json.loads(Path(track).read_text(encoding="utf-8"))
+    Path(track).write_text(json.dumps(doc | {"road_width": 9.0}), encoding="utf-8")  # the same file, another road
+    edited = _eval(shallow_onnx, track, out, "--resume")
+    assert edited.returncode != 0 and "different track_sha256" in edited.stderr
+
     from tools.bench.onnx_builders import save_model
 
     other = save_model("shallow", tmp_path / "other.onnx", seed=1)  # another model: another hash
     refused = _eval(other, track, out, "--resume")
     assert refused.returncode != 0 and "different model_sha256" in refused.stderr
+
+
+def test_a_resume_after_a_change_to_the_code_that_drives_a_run_is_refused(tmp_path, monkeypatch):
+    from tests.scratch_code import STUBS, edit, write_tree
+    from tools.errors import CommandError
+    from tools.evaluate import journal as eval_journal
+
+    code = write_tree(tmp_path / "code")
+    monkeypatch.setattr(eval_journal, "CODE_ROOT", code, raising=False)  # its code read from the scratch tree
+    out, runs = tmp_path / "eval", tmp_path / "eval" / "runs.jsonl"
+    out.mkdir()
+    identity = {"model_sha256": "m", "behavior": "simplistic"}
+    record = {"experiment": "no_variation", "value": None, "seed": 0, "scenario": {"track": "t", "seed": 0}}
+    assert eval_journal.prepare_journal(out, runs, identity, resume=False) == {}
+    runs.write_text(json.dumps(record) + "\n", encoding="utf-8")
+    assert list(eval_journal.prepare_journal(out, runs, identity, resume=True)) == [record_key(record)]
+    edit(code, "docs/page.md", "not the code that drives\n")
+    assert list(eval_journal.prepare_journal(out, runs, identity, resume=True)) == [record_key(record)]
+    for name in ("tools/sim/driving/rules.py", "tools/sim/track/builtin/lake.json", "tools/evaluate/runner.py"):
+        edit(code, name, STUBS[name].replace("0", "1"))  # a number in eta's rule, in a track, in the runner
+        with pytest.raises(CommandError, match="different code"):
+            eval_journal.prepare_journal(out, runs, identity, resume=True)
+        assert eval_journal.prepare_journal(out, runs, identity, resume=False) == {}  # a fresh start takes it
+        runs.write_text(json.dumps(record) + "\n", encoding="utf-8")
 
 
 def test_a_fresh_start_keeps_the_earlier_journal(tmp_path, shallow_onnx):

@@ -122,8 +122,11 @@ def run(args: argparse.Namespace) -> int:
     spec = DriverSpec(model=None if args.server else str(model), server=args.server)
     model_sha = file_sha256(model)
     journal = out / "runs.jsonl"
+    track_file = Path(args.track) if args.track and Path(args.track).is_file() else None  # a name: in the code
     reuse = prepare_journal(out, journal, {"model_sha256": model_sha, "behavior": args.behavior,
-                                            "driver": driver_identity(spec)}, args.resume)
+                                            "driver": driver_identity(spec),
+                                            "track_sha256": file_sha256(track_file) if track_file else None},
+                            args.resume)
     cfg = SuiteConfig(behavior=args.behavior, seeds=args.seeds, base_seed=args.seed, laps=args.laps,
                       speed_limit_kmh=args.speed_limit, experiments=experiments, track=args.track,
                       map_dir=str(out / "failures"), vehicle=args.vehicle, camera=resolve_rig(args.camera, model),

@@ -14,6 +14,10 @@ Round r (``OUT/round-RR/``):
 4. ``record.json``: the round's figures, its seed, the run's config and the code version, written last and
    atomically: a round with a record is finished and never redone.
 
+A run is keyed (``dagger.json``) on its config, its recipe file's content and the code of every step
+(:data:`RUN_ENTRY` and all it imports: collection, training, scoring); a resume under another key is refused, so
+no run mixes rounds of two versions.
+
 A killed run continues with ``resume=True`` at its first unfinished round, inside it at the first unfinished step
 (a half-collected ``data.partial`` is collected again, an interrupted training continues from its checkpoint,
 finished evaluation runs are reused from the journal), and gives the clean run's records.
@@ -30,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.runrecords import code_version, file_sha256, read_json, write_json, write_text
+from protocol.codeversion import ROOT, code_digest
 from protocol.errors import BadValue
 from tools.dagger.config import DaggerConfig
 from tools.dagger.rollout import SUMMARY, CollectionStats, collect_round, read_stats
@@ -42,6 +47,9 @@ RECORD = "record.json"
 SUMMARY_JSON = "summary.json"
 SUMMARY_MD = "rounds.md"
 WORLDS_DIR = "worlds"
+#: Where a round starts (its code is this module and all it imports), and the tree that code is read from.
+RUN_ENTRY = __name__
+CODE_ROOT = ROOT
 
 
 class Stopped(Exception):
@@ -52,22 +60,36 @@ def round_dir(out: Path, round_: int) -> Path:
     return out / f"round-{round_:02d}"
 
 
+def run_key(config: DaggerConfig) -> dict[str, str]:
+    """What a run's rounds depend on beyond its config: the recipe file's content and the code of every step."""
+    from models.training.recipe import find_recipe
+
+    return {"recipe_sha256": file_sha256(find_recipe(config.recipe)), "code": code_digest(RUN_ENTRY, root=CODE_ROOT)}
+
+
 def prepare_run(config: DaggerConfig, out: Path, resume: bool) -> dict[str, Any]:
-    """Check or start ``OUT/dagger.json``; a resume must find the same settings (more budgets may follow)."""
+    """Check or start ``OUT/dagger.json``; a resume must find the same settings (more budgets may follow), the same
+    recipe and the same code (:func:`run_key`)."""
     run_file = out / RUN_FILE
+    key = run_key(config)
     if run_file.is_file():
         if not resume:
             raise BadValue(f"{out} holds a DAgger run already", "add --resume to continue it, or use a new --out")
-        stored = DaggerConfig.from_dict(read_json(run_file)["config"])
+        earlier = read_json(run_file)
+        stored = DaggerConfig.from_dict(earlier["config"])
         if not stored.same_run(config):
             mine, theirs = stored.to_dict(), config.to_dict()
             diff = sorted(k for k in mine if mine[k] != theirs[k])
             raise BadValue(f"--resume: {out} was started with other settings ({', '.join(diff)})",
                            "give the same flags as the first run (more --rounds may follow), or a new --out")
+        if earlier.get("key") != key:
+            what = [k for k in key if (earlier.get("key") or {}).get(k) != key[k]]
+            raise BadValue(f"--resume: {out} was started with another {' and '.join(what)} (its rounds would mix two "
+                           "versions)", "start afresh in a new --out")
     elif out.is_dir() and any(out.iterdir()):
         raise BadValue(f"{out} is not empty and holds no DAgger run", "give a new or empty --out")
     out.mkdir(parents=True, exist_ok=True)
-    meta = {"config": config.to_dict(), "seed": config.seed, "code_version": code_version()}
+    meta = {"config": config.to_dict(), "seed": config.seed, "key": key, "code_version": code_version()}
     write_json(run_file, meta)
     return meta
 

@@ -17,9 +17,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import write_text
+from drive_server.runrecords import file_sha256, read_json, write_json, write_text
 from tools.dagger.config import PERTURBATIONS, DaggerConfig
 from tools.evaluate.experiments import is_autonomous, run_eta
+from tools.evaluate.journal import run_code
 from tools.evaluate.runner import DriverSpec, Runner, read_journal
 from tools.evaluate.suite import SuiteConfig, run_suite
 from tools.sim.driving.rules import TARGET_ETA
@@ -27,6 +28,19 @@ from tools.sim.driving.rules import TARGET_ETA
 log = logging.getLogger(__name__)
 
 JOURNAL = "runs.jsonl"
+IDENTITY = "journal.json"
+
+
+def _journal_for(model: Path, folder: Path) -> Path:
+    """``folder``'s journal, emptied (kept as runs.previous.jsonl) unless it was written for this model file and
+    this code (``journal.json``): a round's model made again scores afresh."""
+    journal, identity_file = folder / JOURNAL, folder / IDENTITY
+    identity = {"model_sha256": file_sha256(model), "code": run_code()}
+    if journal.is_file() and (not identity_file.is_file() or read_json(identity_file) != identity):
+        journal.replace(folder / "runs.previous.jsonl")
+        log.warning("%s was written for another model or code: scored afresh (kept as runs.previous.jsonl)", journal)
+    write_json(identity_file, identity)
+    return journal
 
 
 def runs_planned(config: DaggerConfig) -> int:
@@ -45,7 +59,7 @@ def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list
     from tools.sim.driving.model_rig import model_rig
 
     folder.mkdir(parents=True, exist_ok=True)
-    journal = folder / JOURNAL
+    journal = _journal_for(model, folder)
     spec = DriverSpec(model=str(model))
     rig = model_rig(model)
     base = SuiteConfig(behavior="simplistic", seeds=1, base_seed=0, laps=config.laps,

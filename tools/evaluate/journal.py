@@ -1,4 +1,9 @@
-"""The run journal of ``rbc eval`` (``runs.jsonl``): who wrote it, and what a resumed evaluation may reuse."""
+"""The run journal of ``rbc eval`` (``runs.jsonl``): who wrote it, and what a resumed evaluation may reuse.
+
+A journaled run is reused by its task key (experiment, value, seed, scenario) when the journal's identity
+(``journal.json``) is this evaluation's: the model file, the behavior, the driver, the track file and the code
+that drives a run (:data:`RUN_ENTRY` and all it imports: the simulator, the drivers, the rules).
+"""
 
 from __future__ import annotations
 
@@ -7,10 +12,20 @@ import logging
 from pathlib import Path
 
 from drive_server.runrecords import read_json, write_json, write_text
+from protocol.codeversion import ROOT, code_digest
 from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, read_journal, spec_dict
 
 log = logging.getLogger(__name__)
+
+#: Where a run's record is made (:func:`tools.evaluate.runner.run_task`), and the tree its code is read from.
+RUN_ENTRY = "tools.evaluate.runner"
+CODE_ROOT = ROOT
+
+
+def run_code() -> str:
+    """The version of the code that drives a run: :data:`RUN_ENTRY` and all it imports."""
+    return code_digest(RUN_ENTRY, root=CODE_ROOT)
 
 
 def driver_identity(spec: DriverSpec) -> dict:
@@ -23,8 +38,10 @@ def prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> d
     """Start a fresh journal, or (``--resume``) load the runs of an earlier one for the same model.
 
     ``journal.json`` beside the journal says which model and driver wrote it, so a resume never mixes
-    runs of two models. A fresh start keeps an earlier journal as runs.previous.jsonl instead of deleting it.
+    runs of two models (or two versions of the code: :func:`run_code` joins ``identity``). A fresh start keeps an
+    earlier journal as runs.previous.jsonl instead of deleting it.
     """
+    identity = identity | {"code": run_code()}
     identity_file = out / "journal.json"
     reuse: dict[str, dict] = {}
     if resume and journal.is_file():

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, fields
@@ -18,12 +19,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from protocol.codeversion import ROOT, code_digest, data_digest
 from tools.realdata.recordings import PublicRecording
 from tools.sim.driving.rules import TARGET_ETA
 
 if TYPE_CHECKING:
     from tools.drivelog.loop import LoopRules
 
+log = logging.getLogger(__name__)
 #: The placeholder of ``--models`` that becomes each recording's fold.
 FOLD_FIELD = "{fold}"
 #: Tracks whose recordings are also driven closed loop: all three. The road is found by the manifest's track's
@@ -128,7 +131,9 @@ def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_
     to it as soon as it is finished (a stopped run resumes there)."""
     jobs = [(rec, root, model_for(pattern, rec), closed_loop, rules, smooth) for rec in recs]
     code = measure_version() if journal is not None else ""
-    keys = [score_key(what, rec.name, model, closed_loop, rules, smooth, code) for rec, _, model, *_ in jobs]
+    keys = [score_key(what, rec.name, model, closed_loop, rules, smooth, code,
+                      data_digest([root / rec.name]) if journal is not None else "")
+            for rec, _, model, *_ in jobs]
     out: list[RecordingScore | None] = [journal.get(k) if journal else None for k in keys]
     todo = [i for i, s in enumerate(out) if s is None]
     finished = len(jobs) - len(todo)
@@ -182,10 +187,11 @@ def _mean_of(values: Sequence[float | None]) -> float | None:
 
 # --------------------------------------------------------------------------- a cross-validation that survives a stop
 # Every finished recording's score is appended (and flushed) to a journal the moment it is finished, keyed by
-# everything that determines it: the recording, the model file's content (a retrained fold model is scored
-# afresh), the closed-loop rules and the smoothing. A run started again with the same journal skips what is in
-# it; every score depends only on its key, so a resumed run gives the clean run's figures. A line torn by a
-# kill is ignored (and that recording scored again).
+# everything that determines it: the recording and its data, the model file's content (a retrained fold model is
+# scored afresh), the closed-loop rules, the smoothing and the code that scores (derived from what it imports:
+# protocol.codeversion). A run started again with the same journal skips what is in it; every score depends only
+# on its key, so a resumed run gives the clean run's figures. A line that no longer loads (torn by a kill, or
+# keyed in an older format) is counted in one warning, and that recording scored again.
 
 #: Beside the JSON record: ``OUT.json`` keeps its journal in ``OUT.journal.jsonl``.
 SUFFIX = ".journal.jsonl"
@@ -200,29 +206,29 @@ def model_digest(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
-#: The code a recording's score depends on (the model's own content is in the key besides): the frame format
-#: and preprocessing, the server's pipeline, the closed loop, and this scoring. A change elsewhere (docs,
-#: training, the simulator) leaves a journal valid, so a cross-validation spread over sittings survives commits.
-MEASURE_CODE = ("protocol", "drive_server", "tools/drivelog", "tools/realdata")
-REPO = Path(__file__).resolve().parents[2]
+#: Where the scoring starts: a recording's score depends on the code this module runs (score_recording's
+#: imports: the offline scorer, the labels, the metrics, the closed loop, the server's pipeline, ...), found by
+#: following the imports, so a change to any of it, and to nothing else, scores every recording afresh.
+MEASURE_ENTRY = __name__
+CODE_ROOT = ROOT
+#: The fields of a key; a journal line keyed otherwise (an older format) is not taken.
+KEY_FIELDS = frozenset({"what", "recording", "data", "model", "closed_loop", "rules", "smooth", "code"})
 
 
-def measure_version(root: Path = REPO) -> str:
-    """A digest of the measuring code's Python sources (:data:`MEASURE_CODE`, under ``root``)."""
-    digest = hashlib.sha256()
-    for folder in MEASURE_CODE:
-        for path in sorted((root / folder).rglob("*.py")):
-            digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
-    return f"measure {digest.hexdigest()[:16]}"
+def measure_version(root: Path | None = None) -> str:
+    """The version of the scoring code under ``root`` (None: :data:`CODE_ROOT`): :data:`MEASURE_ENTRY` and all
+    it imports."""
+    return code_digest(MEASURE_ENTRY, root=root or CODE_ROOT)
 
 
 def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: Any, smooth: float | None,
-              code: str = "") -> str:
+              code: str = "", data: str = "") -> str:
     """Everything a recording's score depends on, as one canonical string: with ``code`` (the code version)
-    a run resumed after the measure's code changed scores every recording afresh instead of mixing two."""
-    return json.dumps({"what": what, "recording": name, "model": model_digest(model), "closed_loop": closed_loop,
-                       "rules": asdict(rules) if rules is not None else None, "smooth": smooth, "code": code},
-                      sort_keys=True)
+    a run resumed after the measure's code changed scores every recording afresh instead of mixing two, with
+    ``data`` (the recording's :func:`~protocol.codeversion.data_digest`) a recording cut or fetched again too."""
+    return json.dumps({"what": what, "recording": name, "data": data, "model": model_digest(model),
+                       "closed_loop": closed_loop, "rules": asdict(rules) if rules is not None else None,
+                       "smooth": smooth, "code": code}, sort_keys=True)
 
 
 class ScoreJournal:
@@ -237,12 +243,20 @@ class ScoreJournal:
         names = {f.name for f in fields(RecordingScore)}
         text = path.read_text(encoding="utf-8")
         self._torn = bool(text) and not text.endswith("\n")
+        skipped = 0
         for line in text.splitlines():
+            if not line.strip():
+                continue
             try:
                 entry = json.loads(line)
+                if set(json.loads(entry["key"])) != KEY_FIELDS:
+                    raise ValueError("a key of another format")
                 self.scores[entry["key"]] = RecordingScore(**{k: v for k, v in entry["score"].items() if k in names})
-            except (ValueError, KeyError, TypeError):  # a line torn by a kill: that recording is scored again
-                continue
+            except (ValueError, KeyError, TypeError, AttributeError):  # torn by a kill, or an older format
+                skipped += 1
+        if skipped:
+            log.warning("%s: %d line(s) no longer load (torn by a stop, or written by an older version); "
+                        "those recordings are scored again", path, skipped)
 
     def get(self, key: str) -> RecordingScore | None:
         return self.scores.get(key)
