@@ -142,7 +142,7 @@ class DriveServer:
             self.fault_log.report("slow_reader", "client %s does not read its replies (%d queued, %d bytes unsent, "
                                   "--max-pending %d): disconnected", client.sid, session.queue.qsize(),
                                   client.unsent, self.limits.max_pending_replies)
-            self._close(client.eio_sid, "", hard=True)
+            self._close(session.sid, "", hard=True)  # the engine.io session's id: client.eio_sid
             return
         if not client.direct:
             self.sio.emit(event, payload, to=client.sid)

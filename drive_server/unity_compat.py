@@ -28,6 +28,7 @@ class UnityCompatibleServer(socketio.Server):
     #: connection after a protocol error (eio_sid, reason).
     on_bad_telemetry: Any = None
     on_protocol_error: Any = None
+    manager_initialized: bool  # socketio.Server's own (the package is untyped)
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)

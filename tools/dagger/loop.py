@@ -231,7 +231,7 @@ def make_record(config: DaggerConfig, r: int, stats: CollectionStats, learner: P
         "training": training, "model": model.relative_to(model.parents[2]).as_posix(),
         "model_sha256": file_sha256(model),
         "eval": scores,
-        "target": {"eta": TARGET_ETA, "every_world": bool(worlds) and worlds["at_target"] == worlds["n"],
+        "target": {"eta": TARGET_ETA, "every_world": bool(worlds and worlds["at_target"] == worlds["n"]),
                    "worlds_at_target": worlds["at_target"] if worlds else 0},
         "seed": config.seed, "config": config.to_dict(), "code_version": code_version(),
     }

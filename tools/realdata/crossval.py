@@ -169,13 +169,14 @@ def summarise(scores: Sequence[RecordingScore]) -> list[TrackSummary]:
     for track in tracks:
         mine = [s for s in scores if s.track == track]
         driven = [s for s in mine if s.eta is not None]
+        etas = [s.eta for s in driven if s.eta is not None]  # the same rows, typed for the checker
         out.append(TrackSummary(
             track, len(mine), round(float(np.mean([s.pearson_r for s in mine])), 3), sum(s.beats_zero for s in mine),
             round(float(np.mean([s.eta for s in driven])), 2) if driven else None,
             round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None,
             _mean_of([s.r_to_intent for s in mine]), _mean_of([s.intent_r for s in mine]),
-            float(min(s.eta for s in driven)) if driven else None,
-            int(sum(s.eta >= TARGET_ETA for s in driven)) if driven else None,
+            float(min(etas)) if driven else None,
+            int(sum(eta >= TARGET_ETA for eta in etas)) if driven else None,
             int(sum(s.interventions or 0 for s in driven)) if driven else None))
     return out
 
