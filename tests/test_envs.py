@@ -262,3 +262,42 @@ def test_without_terminate_on_takeover_the_episode_goes_on_from_where_the_car_wa
         obs, reward, terminated, truncated, info = env.step(info["expert_action"])
         assert not terminated and info["intervention"] == ""
     assert info["step"] == taken_at + 30 and reward > 0 and abs(info["cte_m"]) < 0.5
+
+
+def test_the_expert_label_is_the_new_observations_at_sb3s_auto_reset():
+    """Was: SB3's VecEnv resets right after the terminal step and returns the new episode's first observation
+    with the terminal step's info, whose expert_action labelled the terminal state (one frame stale)."""
+    pytest.importorskip("stable_baselines3", reason="SB3's VecEnv needs pip install -e '.[rl]'")
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    reference = DriveEnv(track="lake", jpeg=False, max_episode_steps=3)
+    _, info = reference.reset(seed=4)
+    for _ in range(3):
+        _, _, _, truncated, terminal_info = reference.step(info["expert_action"])
+    assert truncated
+    vec = DummyVecEnv([lambda: gym.make(ENV_ID, track="lake", jpeg=False, max_episode_steps=3)])
+    vec.seed(4)
+    obs = vec.reset()
+    assert np.array_equal(vec.reset_infos[0]["expert_action"], vec.env_method("expert_action")[0])
+    label = vec.reset_infos[0]["expert_action"]
+    for _ in range(3):
+        obs, _, dones, infos = vec.step(np.stack([label]))
+        label = infos[0]["expert_action"]
+    assert dones[0] and not np.array_equal(obs[0], infos[0]["terminal_observation"])  # the new episode's frame
+    fresh = vec.env_method("expert_action")[0]  # the autopilot's action for the state now observed
+    assert abs(fresh[0] - terminal_info["expert_action"][0]) > 0.01  # the two states' labels differ
+    assert np.array_equal(infos[0]["expert_action"], fresh)  # the label of the observation returned with it
+    assert np.array_equal(vec.reset_infos[0]["expert_action"], fresh)
+    assert infos[0]["terminal_expert_action"] == pytest.approx(terminal_info["expert_action"], abs=1e-5)
+    vec.close()
+
+
+def test_a_manual_reset_leaves_the_terminal_steps_info_as_it_was():
+    env = DriveEnv(track="lake", jpeg=False, max_episode_steps=2)
+    _, info = env.reset(seed=0)
+    for _ in range(2):
+        _, _, _, truncated, info = env.step(info["expert_action"])
+    label = info["expert_action"].copy()
+    _, fresh = env.reset()
+    assert truncated and np.array_equal(info["expert_action"], label) and "terminal_expert_action" not in info
+    assert np.array_equal(fresh["expert_action"], env.expert_action())

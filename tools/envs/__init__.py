@@ -38,7 +38,9 @@ learner drives on). ``truncated``: the laps are driven (``info["laps_done"]``), 
 ``info``: ``cte_m`` (from the car's line, + = left), ``heading_error_deg`` (+ = turned left of the lap),
 ``speed_kmh``, ``progress_m``, ``lap_progress`` (laps driven), ``t_s``, ``step``, ``expert_action`` (the
 autopilot's pure-pursuit steering for this state, as an action: the DAgger label), ``intervention``,
-``laps_done`` and, with ``jpeg=True``, ``jpeg`` (the centre frame's bytes as on the wire).
+``laps_done`` and, with ``jpeg=True``, ``jpeg`` (the centre frame's bytes as on the wire). At an SB3 VecEnv's
+auto-reset the step's ``expert_action`` labels the new episode's first observation, the one returned with it,
+and ``terminal_expert_action`` the terminal one (``terminal_observation``).
 
 :class:`OnnxPolicy` drives it with a model from ``rbc train`` through drive_server's pipeline:
 ``policy = OnnxPolicy("models/pretrained/generalist.onnx"); action = policy(obs, info)``.

@@ -48,6 +48,7 @@ class DriveEnv(gym.Env):
         self._pending: deque[SteerCommand] = deque()
         self._steps = 0
         self._frame: np.ndarray | None = None  # the centre camera as rendered, for render()
+        self._last_info: dict[str, Any] | None = None  # the last step's, until reset() (see _relabel_auto_reset)
 
     # --- the Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -67,7 +68,9 @@ class DriveEnv(gym.Env):
         self._pending = deque([SteerCommand(0.0, 0.0)] * self.config.action_delay)
         self._steps = 0
         obs, jpeg = self._observe()
-        return obs, self._info("", False, jpeg)
+        info = self._info("", False, jpeg)
+        self._relabel_auto_reset(info)
+        return obs, info
 
     def step(self, action: Any):
         command = self.command(action)
@@ -87,7 +90,9 @@ class DriveEnv(gym.Env):
         truncated = not terminated and (report.laps_done or report.time_out
                                         or (limit is not None and self._steps >= limit))
         obs, jpeg = self._observe()
-        return obs, float(reward), terminated, truncated, self._info(report.intervention, report.laps_done, jpeg)
+        info = self._info(report.intervention, report.laps_done, jpeg)
+        self._last_info = info
+        return obs, float(reward), terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
         """The centre camera as rendered (before the wire's JPEG), with ``render_mode="rgb_array"``."""
@@ -126,6 +131,20 @@ class DriveEnv(gym.Env):
             return np.array([steering], np.float32)
         throttle = self.law.command(steering * self.law.steer_limit_deg, self.client.wire_speed_kmh())
         return np.array([steering, throttle], np.float32)
+
+    def _relabel_auto_reset(self, info: dict[str, Any]) -> None:
+        """At Stable-Baselines3's auto-reset, make the terminal step's label the new observation's.
+
+        An SB3 VecEnv marks the terminal step's info with ``terminal_observation``, resets at once and returns
+        that info with the NEW episode's first observation; so its ``expert_action`` becomes the label of that
+        observation (the one just computed for the reset) and the terminal state's label moves to
+        ``terminal_expert_action``, as the frame moved to ``terminal_observation``. Any other reset (a loop of
+        one's own, Gymnasium's vector envs, which return the reset's own info) leaves the step's info as it was.
+        """
+        last, self._last_info = self._last_info, None
+        if last is not None and "terminal_observation" in last:  # also where a wrapper's TimeLimit truncated
+            last["terminal_expert_action"] = last["expert_action"]
+            last["expert_action"] = info["expert_action"].copy()
 
     def _observe(self) -> tuple[np.ndarray | dict[str, np.ndarray], bytes]:
         frames = self.client.render()
