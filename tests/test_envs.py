@@ -301,3 +301,68 @@ def test_a_manual_reset_leaves_the_terminal_steps_info_as_it_was():
     _, fresh = env.reset()
     assert truncated and np.array_equal(info["expert_action"], label) and "terminal_expert_action" not in info
     assert np.array_equal(fresh["expert_action"], env.expert_action())
+
+
+def test_the_expert_policy_predicts_the_labels_of_the_bound_envs_across_auto_resets():
+    pytest.importorskip("stable_baselines3", reason="SB3's VecEnv needs pip install -e '.[rl]'")
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.policies import BasePolicy
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from tools.envs import ExpertPolicy
+
+    vec = DummyVecEnv([lambda: gym.make(ENV_ID, track="lake", jpeg=False, max_episode_steps=4)] * 2)
+    expert = ExpertPolicy(vec)
+    vec.seed(2)
+    obs = vec.reset()
+    resets = 0
+    for _ in range(6):  # one auto-reset in each env
+        actions, state = expert.predict(obs, deterministic=True)
+        assert state is None and actions.shape == (2, 1)
+        obs, _, dones, infos = vec.step(actions)
+        resets += int(dones.sum())
+        assert np.array_equal(expert.predict(obs)[0], np.stack([i["expert_action"] for i in infos]))
+    assert resets == 2
+    policy = expert.sb3()  # imitation's DAgger wants an SB3 policy
+    assert isinstance(policy, BasePolicy) and policy.observation_space == vec.observation_space
+    assert np.array_equal(policy.predict(obs, deterministic=True)[0], expert(obs, None, None)[0])
+    with pytest.raises(BadValue, match="2 bound environment"):
+        expert.predict(obs[:1])
+    vec.close()
+    single = gym.make(ENV_ID, track="lake", jpeg=False, max_episode_steps=30)
+    obs, info = single.reset(seed=0)
+    action, _ = ExpertPolicy(single).predict(obs)
+    assert action.shape == (1,) and np.array_equal(action, info["expert_action"])
+    rewards, lengths = evaluate_policy(ExpertPolicy(single), single, n_eval_episodes=1, warn=False,
+                                       return_episode_rewards=True)
+    assert lengths == [30] and 3 < rewards[0] < 7  # no take-over; 2 s from standstill: the metres driven
+
+
+def test_the_expert_policy_binds_gymnasium_vector_envs_and_refuses_others():
+    from tools.envs import ExpertPolicy
+
+    envs = gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID, track="lake", jpeg=False)] * 2)
+    expert = ExpertPolicy(envs)
+    obs, infos = envs.reset(seed=[1, 2])
+    for _ in range(3):
+        actions, _ = expert.predict(obs)
+        assert np.array_equal(actions, infos["expert_action"])
+        obs, _, _, _, infos = envs.step(actions)
+    envs.close()
+    with pytest.raises(BadValue, match="rbc/Drive-v0"):
+        ExpertPolicy(gym.make("CartPole-v1"))
+    with pytest.raises(BadValue):
+        ExpertPolicy(object())  # type: ignore[arg-type]
+
+
+def test_the_pages_expert_policy_example_runs(capsys):
+    """docs/python.md's ExpertPolicy example, verbatim."""
+    pytest.importorskip("stable_baselines3", reason="the example needs pip install -e '.[rl]'")
+    import textwrap
+
+    page = (REPO / "docs" / "python.md").read_text(encoding="utf-8")
+    section = page[page.index("## The autopilot as a policy"):]
+    example = section[section.index("```python\n") + 10:section.index("```\n", section.index("```python"))]
+    exec(compile(textwrap.dedent(example), "docs/python.md", "exec"), {})
+    metres = float(capsys.readouterr().out.split()[0])
+    assert 40 < metres < 80  # 150 steps from standstill towards 25 km/h, no take-over

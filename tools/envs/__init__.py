@@ -43,7 +43,9 @@ auto-reset the step's ``expert_action`` labels the new episode's first observati
 and ``terminal_expert_action`` the terminal one (``terminal_observation``).
 
 :class:`OnnxPolicy` drives it with a model from ``rbc train`` through drive_server's pipeline:
-``policy = OnnxPolicy("models/pretrained/generalist.onnx"); action = policy(obs, info)``.
+``policy = OnnxPolicy("models/pretrained/generalist.onnx"); action = policy(obs, info)``. :class:`ExpertPolicy`
+is the autopilot as a policy bound to the env(s) it labels: SB3's ``predict``, imitation's policy callable and
+(``.sb3()``) an SB3 ``BasePolicy``.
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ from gymnasium.envs.registration import register, registry
 
 from tools.envs.config import DriveEnvConfig, RewardSpec
 from tools.envs.drive_env import DriveEnv
+from tools.envs.expert import ExpertPolicy
 from tools.envs.policy import OnnxPolicy
 
 ENV_ID = "rbc/Drive-v0"
@@ -59,4 +62,4 @@ ENV_ID = "rbc/Drive-v0"
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="tools.envs.drive_env:DriveEnv")
 
-__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "OnnxPolicy", "RewardSpec"]
+__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardSpec"]
