@@ -79,10 +79,14 @@ class DrivePipeline:
         """A new client's smoothing state (None when off: nothing to keep)."""
         return SteeringSmoother(self.smooth) if self.smooth < OFF else None
 
-    def steer(self, rgb: np.ndarray, smoother: SteeringSmoother | None = None) -> float:
+    def steer(self, rgb: np.ndarray, smoother: SteeringSmoother | None = None,
+              monitor: ClientMonitor | None = None) -> float:
         """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``), smoothed by the
-        client's ``smoother`` (:meth:`smoother`) if given."""
-        steering = self._usable(self.model.predict(preprocess(rgb, self.contract)))
+        client's ``smoother`` (:meth:`smoother`) if given; ``monitor`` scores the same input (``monitor.last``)."""
+        x = preprocess(rgb, self.contract)
+        steering = self._usable(self.model.predict(x))
+        if monitor is not None:
+            monitor.observe(x)
         return smoother(steering) if smoother is not None else steering
 
     @staticmethod

@@ -299,3 +299,27 @@ def test_the_closed_loop_flags_are_one_declaration_in_both_commands() -> None:
     crossval = next(a for a in data._actions if isinstance(a, argparse._SubParsersAction)).choices["crossval"]
     assert flags(drive_log) == flags(crossval) and len(flags(drive_log)) == 3
     assert crossval.parse_args(["--models", "m-{fold}.onnx"]).handback == LoopRules.handback_s
+
+
+def test_a_model_with_a_monitor_says_which_take_overs_it_foresaw(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """drive-log scores the model's monitor on the views it drives from, as drive_server --monitor warn would."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from helpers_server import build_shallow
+    from test_monitor import _brightness_graph, _with_monitor
+
+    from drive_server.monitor import MonitorSpec
+
+    model = _with_monitor(build_shallow(tmp_path / "m.onnx", seed=3), tmp_path / "mon.onnx",
+                          MonitorSpec("brightness", -0.5, 0.5, 3), _brightness_graph())
+    out = tmp_path / "r.json"
+    assert main(["drive-log", "--data", str(_curve_log(tmp_path)), "--model", str(model), "--wheelbase", "2.6",
+                 "--json", str(out), "--strip", str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png")]) == 0
+    record = json.loads(out.read_text())
+    monitor = record["monitor"]
+    assert monitor["frames_scored"] > 0 and monitor["episodes"] >= 1  # always above its warning threshold
+    assert monitor["takeovers_scored"] <= record["interventions"]
+    assert monitor["foreseen"] == sum(x is not None for x in monitor["leads_s"])
+    assert "monitor: " in capsys.readouterr().out

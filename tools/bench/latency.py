@@ -146,6 +146,7 @@ def bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir:
             server_args.append("--stock-transport")
         if getattr(args, "record", None) is not None:
             server_args += ["--record", str(args.record)]
+        server_args += ["--monitor", getattr(args, "monitor", "warn")]
         server = ServerProcess(model, server_args, stats_json=stats_path)
         server.start()
         try:

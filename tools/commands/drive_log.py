@@ -112,6 +112,12 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     print(f"degree of autonomy {result.eta:.1f} %  interventions {result.interventions}  "
           f"({record['seconds_per_takeover']:.1f} s of driving per take-over)  offset rms {result.offset_rms_m:.2f} m  "
           f"max {record['offset_max_m']:.2f} m")
+    if run.monitor is not None:
+        m = run.monitor
+        leads = ", ".join(f"{x:.1f} s" for x in m["leads_s"] if x is not None)
+        print(f"monitor: {m['episodes']} warning episode(s); take-overs foreseen {m['foreseen']} of "
+              f"{m['takeovers_scored']}, {m['foreseen_1s']} at least 1 s ahead" + (f" (lead {leads})" if leads else ""))
+        record["monitor"] = m
     if result.off_road_s:
         print(f"the recorded driver was off the road for {result.off_road_s:.1f} s of the log: the person drove "
               "there (pink), not counted")

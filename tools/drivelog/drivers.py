@@ -16,11 +16,12 @@ from tools.drivelog.path import RecordedDrive
 
 
 def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bias: float = 0.0,
-                smooth: float | None = None) -> tuple[Driver, str]:
+                smooth: float | None = None, readings: list[tuple[int, int]] | None = None) -> tuple[Driver, str]:
     """(driver, its name for the record). Exactly one of ``model`` and ``baseline`` is given.
 
     The model's steering is smoothed over the drive as drive_server does for a client: by ``smooth``, or (None)
-    as the model's metadata asks.
+    as the model's metadata asks. A model carrying a misbehaviour monitor is monitored as drive_server's
+    ``--monitor warn`` does: each view's (frame index, state) is appended to ``readings`` if given.
     """
     if model is not None:
         from drive_server.model import SteeringModel
@@ -28,9 +29,14 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
 
         pipeline = DrivePipeline(SteeringModel(Path(model)), DriveConfig(smooth=smooth))
         smoother = pipeline.smoother()
+        monitor = pipeline.client_monitor()  # the model's misbehaviour monitor, if its file carries one (warn)
 
         def base(view: np.ndarray, i: int) -> float:
-            return pipeline.steer(view, smoother)
+            steering = pipeline.steer(view, smoother, monitor)
+            if monitor is not None and readings is not None:
+                reading = monitor.last
+                readings.append((i, int(reading.level) if reading is not None else 0))
+            return steering
 
         name = Path(model).name + (f" smoothed {pipeline.smooth:g}" if smoother is not None else "")
     elif baseline == "recorded":

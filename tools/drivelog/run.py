@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -43,6 +43,24 @@ class RecordingRun:
     driver: str  # the driver's name, for the record
     road: RoadEdges | None  # the road's edges in every frame (lane="road")
     wheelbase_fit: WheelbaseFit | None  # None: given, or the default where the frames could not say
+    monitor: dict[str, Any] | None = None  # the model's misbehaviour monitor on the drive (monitor_outcome)
+
+
+def monitor_outcome(log: RecordedDrive, result: LoopResult, readings: list[tuple[int, int]]) -> dict[str, Any]:
+    """Which take-overs the monitor foresaw, and how early: the benchmark's rules on the recording's own clock
+    (each take-over counts as leaving the road; ones right after another are left out as in the benchmark)."""
+    from tools.monitoreval.scoring import DEFAULT_RULES, RunTrace, episodes, first_warning_leads
+
+    clock = np.concatenate([[0.0], np.cumsum(np.maximum(log.dt, 0.0))])[:len(log)]
+    t = np.array([clock[i] for i, _ in readings], dtype=np.float64)
+    level = np.array([lv for _, lv in readings], dtype=np.uint8)
+    takeovers = [(float(clock[k.frame]), "off_road") for k in result.takeovers]
+    trace = RunTrace("drive-log", "real", t, level, takeovers, float(clock[-1]) if len(clock) else 0.0)
+    leads = [lead for *_, lead in first_warning_leads(trace, DEFAULT_RULES)]
+    return {"takeovers_scored": len(leads), "foreseen": sum(x is not None for x in leads),
+            "foreseen_1s": sum(x is not None and x >= 1.0 for x in leads),
+            "leads_s": [None if x is None else round(x, 2) for x in leads],
+            "episodes": int(len(episodes(trace, DEFAULT_RULES))), "frames_scored": len(readings)}
 
 
 def _with_bar(bars: Bars, phase: str, work: Callable[[Bar | None], T]) -> T:
@@ -92,7 +110,8 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
     """
     rules = rules or LoopRules()
     driven = log if keep is None else chosen_rows(log, None, keep)[0]
-    driver, name = make_driver(driven, model, baseline, steer_bias, smooth)
+    readings: list[tuple[int, int]] = []
+    driver, name = make_driver(driven, model, baseline, steer_bias, smooth, readings)
     wheelbase, fit, road = car_and_road(log, wheelbase_m, rules.lane == "road", bars, say, track)
     if keep is not None:
         road = chosen_rows(log, road, keep)[1]
@@ -103,4 +122,5 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
         on_step = None if bar is None else (lambda j: bar(j + 1, len(log)))
         return drive(log, driver, rules, snapshots=snapshots, on_step=on_step, road=road)
 
-    return RecordingRun(_with_bar(bars, "loop", loop), name, road, fit)
+    result = _with_bar(bars, "loop", loop)
+    return RecordingRun(result, name, road, fit, monitor_outcome(log, result, readings) if readings else None)
