@@ -18,7 +18,7 @@ from drive_server.pipeline import DriveConfig, DrivePipeline  # noqa: E402
 from protocol import SpeedUnit, Telemetry  # noqa: E402
 from protocol.errors import BadValue  # noqa: E402
 from protocol.jpeg import decode_jpeg  # noqa: E402
-from tools.envs import ENV_ID, DriveEnv, OnnxPolicy, RewardSpec  # noqa: E402
+from tools.envs import ENV_ID, DriveEnv, OnnxPolicy, RewardConfig  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 PRETRAINED = REPO / "models" / "pretrained"
@@ -113,7 +113,7 @@ def test_the_autopilot_drives_and_the_reward_is_the_progress(lake: DriveEnv):
 
 
 def test_leaving_the_road_terminates_with_the_penalty():
-    env = DriveEnv(track="lake", reward=RewardSpec(termination=7.0))
+    env = DriveEnv(track="lake", reward=RewardConfig(takeover=7.0))
     obs, info = env.reset(seed=0)
     rewards = []
     for _ in range(400):
@@ -248,7 +248,7 @@ def test_onnx_policy_drives_lake_through_drive_servers_pipeline():
 
 
 def test_without_terminate_on_takeover_the_episode_goes_on_from_where_the_car_was_put_back():
-    env = DriveEnv(track="lake", jpeg=False, terminate_on_takeover=False, reward=RewardSpec(termination=7.0))
+    env = DriveEnv(track="lake", jpeg=False, terminate_on_takeover=False, reward=RewardConfig(takeover=7.0))
     obs, info = env.reset(seed=0)
     for _ in range(400):
         obs, reward, terminated, truncated, info = env.step([-0.5])  # half lock left: off the road, as above
@@ -366,3 +366,79 @@ def test_the_pages_expert_policy_example_runs(capsys):
     exec(compile(textwrap.dedent(example), "docs/python.md", "exec"), {})
     metres = float(capsys.readouterr().out.split()[0])
     assert 40 < metres < 80  # 150 steps from standstill towards 25 km/h, no take-over
+
+
+def _reports(env: DriveEnv) -> list:
+    """The simulator's StepReport of every step of ``env`` from now on."""
+    reports, step = [], env.client.step
+
+    def recording(command, frames):
+        reports.append(step(command, frames))
+        return reports[-1]
+
+    env.client.step = recording
+    return reports
+
+
+def test_the_default_reward_is_the_progress_less_the_lane_and_take_over_costs_exactly():
+    env = DriveEnv(track="lake", jpeg=False)
+    assert env.config.reward == RewardConfig()
+    reports = _reports(env)
+    _, info = env.reset(seed=0)
+    rewards = []
+    for _ in range(400):
+        _, reward, terminated, _, info = env.step([-0.5])  # out of the lane, then off the road
+        rewards.append(reward)
+        if terminated:
+            break
+    assert info["intervention"] == "off_road" and any(r.out_of_lane_s for r in reports)
+    for reward, r in zip(rewards, reports, strict=True):  # the reward as it always was, to the last bit
+        assert reward == 1.0 * r.progress_m - 2.5 * r.out_of_lane_s - (10.0 if r.intervention else 0.0)
+
+
+def test_reward_options_as_keywords_donkeycars_lane_term():
+    env = gym.make(ENV_ID, track="lake", jpeg=False, reward={"progress_per_m": 0, "out_of_lane_per_s": 0,
+                                                             "takeover": 0, "lane_per_m": 1.0, "max_cte_m": 2.0})
+    assert env.unwrapped.config.reward == RewardConfig(progress_per_m=0, out_of_lane_per_s=0, takeover=0,
+                                                       lane_per_m=1.0, max_cte_m=2.0)
+    _, info = env.reset(seed=0)
+    step_s = 1 / env.unwrapped.config.control_hz
+    checked = {"inside": 0, "beyond": 0}
+    for _ in range(400):
+        before = info
+        _, reward, terminated, _, info = env.step([-0.5])
+        if terminated:
+            break
+        cte, speed = (before["cte_m"] + info["cte_m"]) / 2, (before["speed_kmh"] + info["speed_kmh"]) / 7.2
+        expected = (1 - abs(cte) / 2.0) * speed * step_s  # gym-donkeycar's (1 - |cte| / max_cte) * speed
+        if speed > 2.0:
+            assert reward == pytest.approx(expected, abs=0.02), (cte, speed)
+            checked["inside" if abs(cte) < 2.0 else "beyond"] += 1
+    assert checked["inside"] > 10 and checked["beyond"] > 3  # beyond max_cte the term is a cost
+    speed_only = DriveEnv(track="lake", jpeg=False, reward=RewardConfig(progress_per_m=0, speed_per_m=2.0))
+    _, info = speed_only.reset(seed=0)
+    total = 0.0
+    for _ in range(60):
+        _, reward, _, _, info = speed_only.step(info["expert_action"])
+        total += reward
+    assert total == pytest.approx(2.0 * info["progress_m"], rel=0.02)  # on the line: metres driven = progress
+
+
+@pytest.mark.parametrize("reward", [{"lane": 1.0}, {"max_cte_m": 0}, {"takeover": float("nan")}, 3.0])
+def test_bad_reward_options_are_one_clear_error(reward):
+    with pytest.raises(BadValue, match="reward"):
+        gym.make(ENV_ID, track="lake", reward=reward)
+
+
+def test_the_pages_reward_options_run_in_python_and_as_an_rl_zoo_yaml():
+    """docs/python.md's reward examples, verbatim: the Python one and the rl-zoo YAML's env_kwargs."""
+    yaml = pytest.importorskip("yaml")
+    page = (REPO / "docs" / "python.md").read_text(encoding="utf-8")
+    section = page[page.index("### Reward options"):]
+    python = section[section.index("```python\n") + 10:section.index("```\n", section.index("```python"))]
+    scope: dict = {}
+    exec(compile(python, "docs/python.md", "exec"), scope)
+    kwargs = yaml.safe_load(section[section.index("```yaml\n") + 8:section.index("```\n", section.index("```yaml"))])
+    from_yaml = gym.make(ENV_ID, **kwargs["rbc/Drive-v0"]["env_kwargs"])
+    assert from_yaml.unwrapped.config == scope["env"].unwrapped.config
+    assert scope["env"].unwrapped.config.reward == RewardConfig(progress_per_m=0.0, lane_per_m=1.0)

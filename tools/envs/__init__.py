@@ -28,8 +28,10 @@ simulator would send (``jpeg=True``, the pixels drive_server and recorded datase
 ``Dict`` of "center", "left" and "right" frames (SB3: ``MultiInputPolicy``). The action is a float32 ``Box``
 in [-1, 1]: steering (+ = right, 1 = 25 degrees), and with ``steer_throttle`` throttle (< 0 brakes).
 
-Reward (:class:`RewardSpec`): metres along the lap, less 2.5 per second with the car's body over its lane's
-edge, less 10 on a take-over. ``terminated``: the referee took over (off the road, a cone, spun out, wrong
+Reward (:class:`RewardConfig`, ``reward={...}``): by default metres along the lap (about 1,003 a lake lap),
+less 2.5 per second with the car's body over its lane's edge, less 10 on a take-over; gym-donkeycar's
+``(1 - |cte| / max_cte) * speed`` (``lane_per_m``, ``max_cte_m``) and a speed term (``speed_per_m``) are
+off by default. ``terminated``: the referee took over (off the road, a cone, spun out, wrong
 way, stuck; ``info["intervention"]`` says which); with ``terminate_on_takeover=False`` the episode goes on from
 where the referee put the car back (the take-over still costs its penalty and is named in ``info``: DAgger's
 learner drives on). ``truncated``: the laps are driven (``info["laps_done"]``), the lap's time limit or
@@ -52,7 +54,7 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
-from tools.envs.config import DriveEnvConfig, RewardSpec
+from tools.envs.config import DriveEnvConfig, RewardConfig
 from tools.envs.drive_env import DriveEnv
 from tools.envs.expert import ExpertPolicy
 from tools.envs.policy import OnnxPolicy
@@ -62,4 +64,4 @@ ENV_ID = "rbc/Drive-v0"
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="tools.envs.drive_env:DriveEnv")
 
-__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardSpec"]
+__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardConfig"]

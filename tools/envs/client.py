@@ -41,6 +41,8 @@ class StepReport:
     intervention: str  # "" or the referee's cause (tools.sim.driving.rules.Cause): off_road, cone, ...
     laps_done: bool  # the run's laps are driven
     time_out: bool  # the lap's time limit ran out
+    distance_m: float = 0.0  # metres driven over the ground, in any direction
+    abs_cte_distance_m2: float = 0.0  # the integral of |cte| (from the car's line) over those metres
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ class HeadlessSimClient:
         lane_half = track.road_width / (2 * track.lanes) - 0.5 * sim.params.width_m  # the centre's room in the lane
         dt = sim.params.dt
         progress0 = sim.progress
-        outside = 0.0
+        outside = distance = abs_cte_distance = 0.0
         cause = ""
         sim.command = command
         for _ in range(frames):
@@ -119,13 +121,18 @@ class HeadlessSimClient:
                 cause = str(intervention.cause)
                 self._view = before  # the simulator already put the car back: report where it was
                 break
-            if abs(sim.proj.cte * direction - sim.line_offset) > lane_half:
+            cte = abs(sim.proj.cte * direction - sim.line_offset)
+            if cte > lane_half:
                 outside += dt
+            ds = abs(sim.vehicle.state.speed) * dt
+            distance += ds
+            abs_cte_distance += cte * ds
         if not cause:
             self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
         laps_done = sim.done and bool(sim.laps) and len(sim.laps) >= sim.config.laps and sim.laps[-1].completed
         return StepReport(progress_m=self._seen.progress - progress0, out_of_lane_s=outside, intervention=cause,
-                          laps_done=laps_done, time_out=sim.done and not laps_done and not cause)
+                          laps_done=laps_done, time_out=sim.done and not laps_done and not cause,
+                          distance_m=distance, abs_cte_distance_m2=abs_cte_distance)
 
     def follow(self) -> None:
         """Look at the car where it is now (after a take-over: where the referee put it back), not where the

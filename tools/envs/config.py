@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, fields
 
 from drive_server.control import ControlLaw
 from protocol.errors import BadValue
+from tools.envs.client import StepReport
 from tools.sim.driving.scenario import ScenarioConfig
 from tools.sim.render.camera import RIGS
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS
@@ -22,27 +23,60 @@ SPAWNS = ("start", "random")
 
 
 @dataclass(frozen=True)
-class RewardSpec:
-    """The reward per step, as data: progress pays, leaving the lane and being taken over cost.
+class RewardConfig:
+    """The reward per step, as data (``gymnasium.make("rbc/Drive-v0", reward={...})``, an rl-zoo ``env_kwargs``):
 
     reward = progress_per_m * metres driven along the lap in the step
              - out_of_lane_per_s * seconds of the step with the car's body over its lane's edge
-             - termination (once, on the step of a take-over, which ends the episode by default)
+             - takeover (once, on the step of a take-over, which ends the episode by default)
+             + lane_per_m * the integral over the step of (1 - |cte| / max_cte_m) * speed dt
+             + speed_per_m * metres driven over the ground in the step (in any direction)
 
-    A step is 1/15 s (``control_hz``), about 0.46 m at the default 25 km/h, so a step fully out of the lane
-    costs about a third of what it earns, and a take-over (leaving the road, hitting a cone, spinning out,
-    driving the wrong way, standing still) the progress of 10 m.
+    ``lane_per_m`` is gym-donkeycar's ``(1 - |cte| / max_cte) * speed`` per second (cte from the car's line;
+    a cost beyond ``max_cte_m``), ``speed_per_m`` the same without the lane's factor. The default is progress
+    only: about 1,003 per lap of the lake (its length in metres), 0.46 a step at 25 km/h; a step fully out of
+    the lane costs about a third of what it earns, and a take-over (leaving the road, hitting a cone, spinning
+    out, driving the wrong way, standing still) the progress of 10 m.
     """
 
     progress_per_m: float = 1.0
     out_of_lane_per_s: float = 2.5
-    termination: float = 10.0
+    takeover: float = 10.0
+    lane_per_m: float = 0.0
+    max_cte_m: float = 2.0  # where the lane term reaches 0 (half the lake's lane)
+    speed_per_m: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not isinstance(value, int | float) or not math.isfinite(value):
+            if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
                 raise BadValue(f"reward {f.name} must be a finite number, got {value!r}")
+        if self.max_cte_m <= 0:
+            raise BadValue(f"reward max_cte_m must be positive, got {self.max_cte_m!r}")
+
+    @classmethod
+    def of(cls, value: object) -> RewardConfig:
+        """A RewardConfig from itself or a mapping of its fields (an unknown key is a BadValue naming the known)."""
+        if isinstance(value, cls):
+            return value
+        if not isinstance(value, dict):
+            raise BadValue(f"reward must be a tools.envs.RewardConfig or a dict of its fields, got {value!r}")
+        known = [f.name for f in fields(cls)]
+        unknown = sorted(set(value) - set(known))
+        if unknown:
+            raise BadValue(f"unknown reward option(s): {', '.join(map(str, unknown))}", f"known: {', '.join(known)}")
+        return cls(**value)
+
+    def reward(self, step: StepReport) -> float:
+        """The reward of one step of the simulator."""
+        reward = self.progress_per_m * step.progress_m - self.out_of_lane_per_s * step.out_of_lane_s
+        if step.intervention:
+            reward -= self.takeover
+        if self.lane_per_m:
+            reward += self.lane_per_m * (step.distance_m - step.abs_cte_distance_m2 / self.max_cte_m)
+        if self.speed_per_m:
+            reward += self.speed_per_m * step.distance_m
+        return reward
 
 
 @dataclass(frozen=True)
@@ -74,7 +108,7 @@ class DriveEnvConfig:
     # False: a take-over does not end the episode; the referee has put the car back on its line, the step's
     # observation is the car there and info["intervention"] names the cause (DAgger: the learner drives on)
     terminate_on_takeover: bool = True
-    reward: RewardSpec = field(default_factory=RewardSpec)
+    reward: RewardConfig = field(default_factory=RewardConfig)  # or a dict of its fields
 
     def __post_init__(self) -> None:
         _choice("camera", self.camera, tuple(RIGS))
@@ -109,8 +143,7 @@ class DriveEnvConfig:
         if self.track is not None and self.world_seed is not None:
             raise BadValue("give track or world_seed, not both",
                            "world_seed=S is the procedural world S; track='world:S' names the same world")
-        if not isinstance(self.reward, RewardSpec):
-            raise BadValue(f"reward must be a tools.envs.RewardSpec, got {type(self.reward).__name__}")
+        object.__setattr__(self, "reward", RewardConfig.of(self.reward))
 
     @property
     def track_name(self) -> str:

@@ -79,13 +79,10 @@ class DriveEnv(gym.Env):
             command = self._pending.popleft()
         report = self.client.step(command, self.config.frames_per_step)
         self._steps += 1
-        r = self.config.reward
         terminated = bool(report.intervention) and self.config.terminate_on_takeover
         if report.intervention and not terminated:
             self.client.follow()  # observe the car where the referee put it: the next action drives from there
-        reward = r.progress_per_m * report.progress_m - r.out_of_lane_per_s * report.out_of_lane_s
-        if report.intervention:
-            reward -= r.termination
+        reward = self.config.reward.reward(report)
         limit = self.config.max_episode_steps
         truncated = not terminated and (report.laps_done or report.time_out
                                         or (limit is not None and self._steps >= limit))
