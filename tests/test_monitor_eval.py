@@ -134,3 +134,27 @@ def test_rbc_sim_sums_up_the_monitor_and_draws_its_score(tmp_path):
     text = out.getvalue()
     assert "monitor brightness (warn): 1 warning(s), 0 alarm(s)" in text and "foreseen:" in text
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_world_run_loads_the_generated_world(monkeypatch, tmp_path):
+    """world:SEED is a generated world's file for the simulator (the first benchmark failed on every world run)."""
+    from helpers_server import build_shallow
+    from test_monitor import _brightness_graph, _with_monitor
+
+    from drive_server.monitor import MonitorSpec
+    from tools.monitoreval import runner
+    from tools.monitoreval.runset import RunSpec
+    from tools.sim.driving import session
+
+    seen = []
+
+    def fake(config, driver, **_):
+        seen.append(config.track)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(session, "run_scenario", fake)
+    model = _with_monitor(build_shallow(tmp_path / "m.onnx"), tmp_path / "mon.onnx", MonitorSpec("b", 0, 1, 3),
+                          _brightness_graph())
+    with pytest.raises(RuntimeError, match="stop here"):
+        runner.drive(RunSpec("w", "nominal", "none", 0.0, "world:300"), model, "warn")
+    assert seen and seen[0].endswith(".json") and "world-300" in seen[0]

@@ -75,11 +75,12 @@ def drive(spec: RunSpec, model: Path, mode: str) -> dict[str, Any]:
     from tools.sim.driving.model_rig import model_rig
     from tools.sim.driving.scenario import ScenarioConfig
     from tools.sim.driving.session import run_scenario
+    from tools.sim.worldgen import resolve_track_name
 
     driver = OnnxDriver(model, monitor=MonitorPolicy(mode=MonitorMode(mode)))
     if driver.monitor is None:
         raise BadValue(f"{model.name} carries no monitor (attach one with rbc monitor fit)")
-    config = ScenarioConfig(track=spec.track, seed=spec.seed, light_intensity=spec.light_intensity,
+    config = ScenarioConfig(track=resolve_track_name(spec.track), seed=spec.seed, light_intensity=spec.light_intensity,
                             light_direction_deg=spec.light_direction_deg, yaw_offset_deg=spec.yaw_offset_deg,
                             cones=spec.cones, cone_seed=spec.seed, camera=model_rig(model))
     result = run_scenario(config, driver)
@@ -164,8 +165,7 @@ def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Pa
             try:
                 for future in concurrent.futures.as_completed(futures):
                     finished(futures[future], future.result())
-            except KeyboardInterrupt:
-                for future in futures:
-                    future.cancel()
+            except BaseException:  # a failed run or Ctrl-C: the runs not started are not waited for
+                pool.shutdown(wait=False, cancel_futures=True)
                 raise
     return [(spec, mode, journal.done[key]) for spec, mode, key in order]
