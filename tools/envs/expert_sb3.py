@@ -7,11 +7,25 @@ deterministic expert (its DAgger), so there the expert must be one.
 
 from __future__ import annotations
 
+from typing import Any, Protocol
+
 import numpy as np
 import torch
+from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 
-from tools.envs.expert import ExpertPolicy
+
+class ExpertPolicy(Protocol):
+    """What this module uses of :class:`tools.envs.expert.ExpertPolicy` (which imports it: no import back)."""
+
+    observation_space: spaces.Space[Any]
+    action_space: spaces.Space[Any]
+
+    def labels(self) -> np.ndarray: ...
+
+    def predict(self, observation: np.ndarray | dict[str, np.ndarray], state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]: ...
 
 
 class SB3ExpertPolicy(BasePolicy):
