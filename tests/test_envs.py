@@ -442,3 +442,52 @@ def test_the_pages_reward_options_run_in_python_and_as_an_rl_zoo_yaml():
     from_yaml = gym.make(ENV_ID, **kwargs["rbc/Drive-v0"]["env_kwargs"])
     assert from_yaml.unwrapped.config == scope["env"].unwrapped.config
     assert scope["env"].unwrapped.config.reward == RewardConfig(progress_per_m=0.0, lane_per_m=1.0)
+
+
+def test_a_bad_track_name_fails_at_make():
+    """Was: make passed and reset raised a traceback from the simulator."""
+    with pytest.raises(BadValue, match="nolake: no such track file"):
+        gym.make(ENV_ID, track="nolake")
+
+
+def test_step_after_close_or_before_reset_says_so():
+    """Was: RuntimeError "HeadlessSimClient.start() was not called" for both."""
+    env = DriveEnv(track="lake", jpeg=False)
+    with pytest.raises(gym.error.ResetNeeded, match=r"reset\(\)"):
+        env.step([0.0])
+    env.reset(seed=0)
+    env.step([0.0])
+    env.close()
+    with pytest.raises(gym.error.ClosedEnvironmentError, match="closed") as exc:
+        env.step([0.0])
+    assert isinstance(exc.value, BadValue) and "\n" not in str(exc.value)
+    env.reset(seed=0)  # a closed environment opens again on reset, as Gymnasium's own do
+    env.step([0.0])
+
+
+def test_human_render_mode_needs_pygame_and_says_so_at_make(monkeypatch, tmp_path):
+    """Was: gym.make applied gymnasium's HumanRendering and the first reset failed on the pygame import."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pygame" else real(name, *a))
+    with pytest.raises(BadValue, match="pygame") as exc:
+        gym.make(ENV_ID, track="lake", render_mode="human")
+    assert "pip install pygame" in exc.value.hint
+    monkeypatch.undo()
+    (tmp_path / "pygame.py").write_text("")  # present (the window opens on the first frame: not here)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    env = gym.make(ENV_ID, track="lake", render_mode="human")
+    assert env.render_mode == "human" and isinstance(env.unwrapped, DriveEnv)
+    assert env.unwrapped.render_mode == "rgb_array"  # gymnasium's HumanRendering shows its frames
+
+
+def test_the_pages_keyword_list_names_every_argument():
+    from dataclasses import fields
+
+    from tools.envs import DriveEnvConfig
+
+    page = (REPO / "docs" / "python.md").read_text(encoding="utf-8")
+    keywords = page[page.index("Keyword arguments of `gym.make`"):page.index("### Reward options")]
+    missing = [f.name for f in fields(DriveEnvConfig) if f"`{f.name}`" not in keywords]
+    assert missing == [] and "`render_mode`" in keywords

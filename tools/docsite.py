@@ -41,6 +41,11 @@ API: tuple[str, ...] = (
     "drive_server.model:SteeringModel",
     "drive_server.pipeline:DrivePipeline",
     "tools.evaluate.suite:run_suite",
+    "tools.envs.drive_env:DriveEnv",
+    "tools.envs.config:DriveEnvConfig",
+    "tools.envs.config:RewardConfig",
+    "tools.envs.expert:ExpertPolicy",
+    "tools.envs.policy:OnnxPolicy",
 )
 
 

@@ -21,7 +21,8 @@ Keyword arguments (:class:`DriveEnvConfig`): ``track`` (a built-in name, a track
 the paper's Eq. 14 exactly as drive_server computes them, or "steer_throttle"); ``speed_limit_kmh``
 (Eq. 14's v_l, a governor with steer_throttle); ``jpeg`` (default True: the wire's JPEG round trip);
 ``laps``; ``max_episode_steps``; ``spawn`` ("start" or "random"); ``action_delay`` (1: Unity's two frames in
-flight); ``render_mode`` (None or "rgb_array": the centre camera as rendered); and more in the config.
+flight); ``render_mode`` (None, "rgb_array": the centre camera as rendered, or "human": in a window, with
+pygame); and more in the config.
 
 Spaces: the observation is the centre camera's frame, uint8 (160, 320, 3) RGB, decoded from the JPEG the
 simulator would send (``jpeg=True``, the pixels drive_server and recorded datasets have); with ``cameras=3`` a
@@ -62,6 +63,6 @@ from tools.envs.policy import OnnxPolicy
 ENV_ID = "rbc/Drive-v0"
 
 if ENV_ID not in registry:
-    register(id=ENV_ID, entry_point="tools.envs.drive_env:DriveEnv")
+    register(id=ENV_ID, entry_point="tools.envs.drive_env:make")  # DriveEnv; "human": in a window
 
 __all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardConfig"]

@@ -183,7 +183,7 @@ def resolve_track(config: DriveEnvConfig) -> str:
     worlds it is evaluated on); ``purpose="eval"`` allows it.
     """
     from tools.sim.collect.worlds import training_seed_problem
-    from tools.sim.track.files import world_seed_of
+    from tools.sim.track.files import get_track, world_seed_of
     from tools.sim.worldgen.generate import resolve_track_name
 
     name = config.track_name
@@ -193,4 +193,6 @@ def resolve_track(config: DriveEnvConfig) -> str:
         if problem:
             raise BadValue(problem, "pick a world_seed in the training range, or make the environment with "
                                     "purpose='eval' to evaluate on it (never train on it)")
-    return resolve_track_name(name)
+    path = resolve_track_name(name)
+    get_track(path)  # a bad name or file fails here, at make, not at the first reset (loaded once per process)
+    return path

@@ -7,6 +7,7 @@ telemetry reports), the simulator runs it, and the observation is the next camer
 
 from __future__ import annotations
 
+import importlib.util
 from collections import deque
 from typing import Any
 
@@ -15,11 +16,32 @@ import numpy as np
 from gymnasium import spaces
 
 from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
-from protocol.errors import BadValue
+from protocol.errors import BadValue, UserError
 from tools.envs.client import HeadlessSimClient
 from tools.envs.config import config_from_kwargs, resolve_track
 
 FRAME_SHAPE = (FRAME_HEIGHT, FRAME_WIDTH, 3)
+
+
+class EnvClosedError(BadValue, gym.error.ClosedEnvironmentError):
+    """``step()`` on an environment after ``close()`` (``reset()`` opens it again)."""
+
+
+class EnvNotResetError(UserError, gym.error.ResetNeeded):
+    """``step()`` before the first ``reset()``."""
+
+
+def make(render_mode: str | None = None, **kwargs: Any) -> gym.Env[Any, Any]:
+    """``gymnasium.make``'s entry point: a :class:`DriveEnv`; with ``render_mode="human"`` inside Gymnasium's
+    ``HumanRendering`` window, which needs pygame: without it the make fails here, in one line."""
+    if render_mode != "human":
+        return DriveEnv(render_mode=render_mode, **kwargs)
+    if importlib.util.find_spec("pygame") is None:
+        raise BadValue("render_mode='human' shows the frames in a pygame window, and pygame is not installed",
+                       "pip install pygame, or use render_mode='rgb_array' and env.render()")
+    from gymnasium.wrappers import HumanRendering
+
+    return HumanRendering(DriveEnv(render_mode="rgb_array", **kwargs))
 
 
 class DriveEnv(gym.Env):
@@ -30,7 +52,8 @@ class DriveEnv(gym.Env):
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         if render_mode not in (None, "rgb_array"):
-            raise BadValue(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+            raise BadValue(f"render_mode must be None or 'rgb_array', got {render_mode!r}",
+                           "gymnasium.make('rbc/Drive-v0', render_mode='human') shows the frames in a window")
         self.render_mode = render_mode
         self.config = config = config_from_kwargs(kwargs)
         self.metadata = {**self.metadata, "render_fps": config.control_hz}
@@ -48,6 +71,7 @@ class DriveEnv(gym.Env):
         self._pending: deque[SteerCommand] = deque()
         self._steps = 0
         self._frame: np.ndarray | None = None  # the centre camera as rendered, for render()
+        self._closed = False
         self._last_info: dict[str, Any] | None = None  # the last step's, until reset() (see _relabel_auto_reset)
 
     # --- the Gymnasium API --------------------------------------------------------------------------
@@ -55,6 +79,7 @@ class DriveEnv(gym.Env):
         """A new episode; ``seed`` makes it and every step after it reproducible. ``options``: ``spawn_s``
         (metres along the track to start at), ``cone_seed`` (the cones' layout, with ``cones=N``)."""
         super().reset(seed=seed)
+        self._closed = False
         options = dict(options or {})
         unknown = sorted(set(options) - {"spawn_s", "cone_seed"})
         if unknown:
@@ -73,6 +98,11 @@ class DriveEnv(gym.Env):
         return obs, info
 
     def step(self, action: Any):
+        if self.client.sim is None:
+            if self._closed:
+                raise EnvClosedError("step() after close(): this rbc/Drive-v0 environment is closed",
+                                     "reset() it to drive again, or make a new one")
+            raise EnvNotResetError("step() before reset(): call env.reset(seed=...) first")
         command = self.command(action)
         if self._pending:
             self._pending.append(command)
@@ -98,6 +128,7 @@ class DriveEnv(gym.Env):
         return None if self._frame is None else self._frame.copy()
 
     def close(self) -> None:
+        self._closed = True
         self.client.sim = None
         self.client.expert = None
 
