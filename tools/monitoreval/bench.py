@@ -41,7 +41,7 @@ class EvalPlan:
 def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
     from drive_server.model import SteeringModel
     from tools.monitoreval.cost import monitor_cost
-    from tools.monitoreval.report import closed_loop, figures, tables
+    from tools.monitoreval.report import closed_loop, figures, table_rows, tables
     from tools.monitoreval.runner import drive_all, file_digest
 
     found = SteeringModel(plan.model).monitor()
@@ -60,6 +60,7 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
         "closed_loop": closed_loop(results) if plan.act else {},
         "cost": monitor_cost(plan.model, plan.cost_log) if plan.cost_log is not None else None,
     }
+    record["rows"] = table_rows(record)
     write_json(plan.out / RECORD, record)
     write_text(plan.out / TABLES, tables(record))
     return record

@@ -137,3 +137,47 @@ def tables(record: dict[str, Any]) -> str:
                   f"| monitor on (act) | {cost['on']['p50_ms']:.3f} ms | {cost['on']['p99_ms']:.3f} ms |",
                   f"| added | {cost['added']['p50_ms']:.3f} ms | {cost['added']['p99_ms']:.3f} ms |"]
     return "\n".join(lines) + "\n"
+
+
+def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
+    """The tables' rows as text cells, for a results record (``tools.results`` renders rows of a record)."""
+    f, c, cost = record["figures"]["all"], record.get("closed_loop") or {}, record.get("cost")
+
+    def s(x: float | None) -> str:
+        return "-" if x is None else f"{x:.1f} s"
+
+    anchors = [{"monitor": f"ours: {record['monitor']['score']}, held-out thresholds", "r1": _pct(f["recall_at"]["1"]),
+                "r2": _pct(f["recall_at"]["2"]), "r3": _pct(f["recall_at"]["3"]), "r46": _pct(f["recall_4_6"]),
+                "f3": f"{f['f3_1_3']:.2f}"}]
+    anchors += [{"monitor": f"{a.monitor} (published, in-sample)", "r1": _pct(a.recall_1), "r2": _pct(a.recall_2),
+                 "r3": _pct(a.recall_3), "r46": "77.0 %" if a.monitor.startswith("SelfOracle") else "-",
+                 "f3": "-" if a.f3 is None else f"{a.f3:.2f}"} for a in ANCHORS]
+    deployment = [
+        {"figure": "misbehaviours (runs with warn)", "value": f"{f['misbehaviours']}"},
+        {"figure": "recall at a lead of at least 1 / 2 / 3 s",
+         "value": " / ".join(_pct(f["lead_recall_at"][k]) for k in ("1", "2", "3"))},
+        {"figure": "median / p10 lead of the first warning",
+         "value": f"{s(f['lead_median_s'])} / {s(f['lead_p10_s'])}"},
+        {"figure": "warning episodes followed by a misbehaviour within 10 s", "value": _pct(f["lead_precision"])},
+        {"figure": "false episodes per hour of held-out nominal driving (95 % bound)",
+         "value": f"{f['false_per_hour']:.2f} ({f['false_per_hour_upper95']:.2f}) over {f['nominal_hours']:.1f} h"},
+    ]
+    closed = []
+    if c:
+        closed.append({"figure": f"misbehaviours on the {c['failing_runs']} perturbed and degraded runs",
+                       "warn": f"{c['misbehaviours_off']}",
+                       "act": f"{c['misbehaviours_act']} ({_pct(c['prevented'])} prevented)"})
+        closed.append({"figure": "stuck or wrong-way take-overs there", "warn": f"{c['stuck_or_wrong_way_off']}",
+                       "act": f"{c['stuck_or_wrong_way_act']}"})
+        for key, label, unit in (("eta", "degree of autonomy, held-out nominal", " %"),
+                                 ("lap_time_s", "lap time, held-out nominal", " s"),
+                                 ("mean_speed_kmh", "mean speed, held-out nominal", " km/h")):
+            off, act, ch = c[f"nominal_{key}_off"], c[f"nominal_{key}_act"], c[f"nominal_{key}_change"]
+            if off is not None and act is not None:
+                closed.append({"figure": label, "warn": f"{off:.2f}{unit}",
+                               "act": f"{act:.2f}{unit}" + (f" ({100 * ch:+.1f} %)" if ch is not None else "")})
+    costs = []
+    if cost:
+        costs = [{"monitor": name, "p50": f"{cost[key]['p50_ms']:.3f} ms", "p99": f"{cost[key]['p99_ms']:.3f} ms"}
+                 for name, key in (("off", "off"), ("on (act)", "on"), ("added", "added"))]
+    return {"anchors": anchors, "deployment": deployment, "closed_loop": closed, "cost": costs}
