@@ -78,7 +78,7 @@ def test_a_tiny_benchmark_drives_scores_resumes_and_records(tmp_path):
 
     from drive_server.monitor import MonitorSpec
     from tools.monitoreval import runner
-    from tools.monitoreval.report import closed_loop, figures, tables
+    from tools.monitoreval.report import closed_loop, compare, figures, tables
     from tools.monitoreval.runset import RunSpec
 
     model = _with_monitor(build_shallow(tmp_path / "m.onnx", seed=3), tmp_path / "mon.onnx",
@@ -86,20 +86,27 @@ def test_a_tiny_benchmark_drives_scores_resumes_and_records(tmp_path):
     stadium_track = write_stadium(tmp_path, straight=40.0, radius=20.0)
     specs = [RunSpec("nominal-0", "nominal", "none", 0.0, stadium_track),
              RunSpec("dark-0", "perturbed", "light", 0.2, stadium_track, light_intensity=0.2)]
+    calm = MonitorSpec("brightness", 0.4, 0.45, 15)  # the same score, thresholds it never reaches
+    shadow = _with_monitor(tmp_path / "m.onnx", tmp_path / "calm.onnx", calm, _brightness_graph())
     out = tmp_path / "eval"
-    results = runner.drive_all(specs, model, ("warn", "act"), out)
+    results = runner.drive_all(specs, model, ("warn", "act"), out, shadows=(shadow,))
     lines = (out / runner.JOURNAL).read_text().splitlines()
     assert len(lines) == 4 and all(json.loads(line)["run"]["t"] for line in lines)
+    run = json.loads(lines[0])["run"]
+    assert len(run["shadows"]["calm.onnx"]) == len(run["t"]) == len(run["level"])  # every frame scored by both
     calls = []
     monkey = pytest.MonkeyPatch()
     monkey.setattr(runner, "drive", lambda *a: calls.append(a))
-    again = runner.drive_all(specs, model, ("warn", "act"), out)
+    again = runner.drive_all(specs, model, ("warn", "act"), out, shadows=(shadow,))
     monkey.undo()
     assert calls == [] and [r for *_, r in again] == [r for *_, r in results]
+    monitors = compare(results, RULES, {"calm.onnx": calm}, "brightness")
+    assert [m["monitor"] for m in monitors] == ["brightness", "calm.onnx"]
+    assert monitors[1]["figures"]["episodes"] == 0 and monitors[0]["figures"]["episodes"] > 0
     record = {"monitor": {"score": "brightness"}, "figures": figures(results, RULES),
-              "closed_loop": closed_loop(results), "cost": None}
+              "closed_loop": closed_loop(results), "cost": None, "monitors": monitors}
     text = tables(record)
-    assert "ours: brightness" in text and "SelfOracle" in text
+    assert "ours: brightness" in text and "SelfOracle" in text and "calm.onnx" in text
     warn = {s.name: r for s, m, r in results if m == "warn"}
     assert warn["nominal-0"]["takeovers"], "a random model should leave the road"
 

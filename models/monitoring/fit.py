@@ -13,12 +13,18 @@ import numpy as np
 from drive_server.model import SteeringModel
 from drive_server.monitor import FRAMES_PER_SECOND, MonitorSpec
 from models.monitoring.attach import attach_monitor
-from models.monitoring.autoencoder import SCORE_NAME, export_score_graph, scores, train_autoencoder
+from models.monitoring.autoencoder import SCORE_NAME as AUTOENCODER
+from models.monitoring.autoencoder import export_score_graph, train_autoencoder
 from models.monitoring.calibrate import calibrate
+from models.monitoring.disagreement import SCORE_NAME as SHIFT
+from models.monitoring.disagreement import SHIFT_PIXELS, graph_scores, shift_disagreement_graph
 from models.monitoring.frames import load_runs
 from protocol.errors import BadValue
 
 log = logging.getLogger(__name__)
+
+#: The scores ``rbc monitor fit`` can attach.
+SCORES = (AUTOENCODER, SHIFT)
 
 
 @dataclass(frozen=True)
@@ -29,6 +35,7 @@ class FitPlan:
     out: Path
     train: tuple[Path, ...]
     calibration: tuple[Path, ...]
+    score: str = AUTOENCODER  # or "shift": the model's disagreement with itself on a moved frame (no training)
     epochs: int = 6
     stride: int = 2  # every 2nd training frame: neighbours at 15 Hz are near copies
     seed: int = 0
@@ -41,8 +48,10 @@ class FitPlan:
         if overlap:
             raise BadValue(f"calibration data must be other runs than the training data; both have "
                            f"{', '.join(sorted(str(p) for p in overlap))}")
-        if not self.train or not self.calibration:
-            raise BadValue("give training data (--data) and calibration data (--calibration)")
+        if self.score not in SCORES:
+            raise BadValue(f"unknown score {self.score!r}; choose one of {', '.join(SCORES)}")
+        if (self.score == AUTOENCODER and not self.train) or not self.calibration:
+            raise BadValue("give calibration data (--calibration), and for the autoencoder training data (--data)")
         if self.epochs < 1 or self.stride < 1:
             raise BadValue(f"epochs and stride must be >= 1, got {self.epochs} and {self.stride}")
 
@@ -56,18 +65,30 @@ class FitResult:
 
 def fit_monitor(plan: FitPlan, say: Any = log.info) -> FitResult:
     contract = SteeringModel(plan.model).contract
-    say(f"reading training frames from {len(plan.train)} folder(s) (every {plan.stride}. frame)")
-    train = np.concatenate(load_runs(list(plan.train), contract, plan.stride,
-                                     progress=lambda d, t: say(f"  {d:,} of {t:,} frames")))
-    say(f"training the autoencoder on {len(train):,} frames, {plan.epochs} epochs")
-    model = train_autoencoder(train, contract, epochs=plan.epochs, seed=plan.seed,
-                              progress=lambda e, n, loss: say(f"  epoch {e}/{n}: reconstruction error {loss:.5f}"))
+    record: dict[str, Any] = {"score": plan.score, "seed": plan.seed}
+    if plan.score == AUTOENCODER:
+        say(f"reading training frames from {len(plan.train)} folder(s) (every {plan.stride}. frame)")
+        train = np.concatenate(load_runs(list(plan.train), contract, plan.stride,
+                                         progress=lambda d, t: _every_tenth(say, d, t)))
+        say(f"training the autoencoder on {len(train):,} frames, {plan.epochs} epochs")
+        model = train_autoencoder(train, contract, epochs=plan.epochs, seed=plan.seed,
+                                  progress=lambda e, n, loss: say(f"  epoch {e}/{n}: reconstruction error {loss:.5f}"))
+        graph = export_score_graph(model, contract)
+        record |= {"train_frames": int(len(train)), "train": [p.name for p in plan.train], "epochs": plan.epochs}
+    else:
+        graph = shift_disagreement_graph(plan.model)
+        record |= {"shift_pixels": SHIFT_PIXELS}
     say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
-    runs = load_runs(list(plan.calibration), contract, 1, progress=lambda d, t: say(f"  {d:,} of {t:,} frames"))
-    cal = calibrate([scores(model, r) for r in runs], plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
+    runs = load_runs(list(plan.calibration), contract, 1, progress=lambda d, t: _every_tenth(say, d, t))
+    cal = calibrate([graph_scores(graph, r) for r in runs], plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
                     source=", ".join(p.name for p in plan.calibration))
-    record = {**cal.record, "train_frames": int(len(train)), "train": [p.name for p in plan.train],
-              "epochs": plan.epochs, "seed": plan.seed}
-    spec = MonitorSpec(SCORE_NAME, cal.warn, cal.alarm, plan.window, record)
-    attach_monitor(plan.model, plan.out, spec, export_score_graph(model, contract))
-    return FitResult(spec, int(len(train)), record)
+    record = {**cal.record, **record}
+    spec = MonitorSpec(plan.score, cal.warn, cal.alarm, plan.window, record)
+    attach_monitor(plan.model, plan.out, spec, graph)
+    return FitResult(spec, int(record.get("train_frames", 0)), record)
+
+
+def _every_tenth(say: Any, done: int, total: int) -> None:
+    """Progress with its total, about ten lines per phase."""
+    if done % max(1000, (total // 10000 + 1) * 1000) == 0 or done == total:
+        say(f"  {done:,} of {total:,} frames")

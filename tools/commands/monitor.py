@@ -17,7 +17,7 @@ from tools.errors import CommandError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from models.monitoring.fit import FitPlan
+    from models.monitoring.fit import SCORES, FitPlan
     from tools.monitoreval.bench import EvalPlan
 
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True,
@@ -28,8 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                      "thresholds on other nominal runs, write MODEL with the monitor as OUT")
     fit.add_argument("model", type=Path, help="the ONNX steering model (left as it is)")
     fit.add_argument("--out", type=Path, required=True, help="the model file with the monitor to write (.onnx)")
-    fit.add_argument("--data", type=Path, action="append", required=True, metavar="DIR",
-                     help="nominal driving to train on (Udacity-format folder, e.g. from rbc collect; repeat)")
+    fit.add_argument("--score", choices=SCORES, default=FitPlan.score,
+                     help="autoencoder: SelfOracle's reconstruction error (trained on --data); shift: the model's "
+                          "disagreement with itself on the frame moved 3 pixels sideways (no training) "
+                          "(default %(default)s)")
+    fit.add_argument("--data", type=Path, action="append", default=[], metavar="DIR",
+                     help="nominal driving to train the autoencoder on (Udacity-format folder, e.g. from rbc collect; "
+                          "repeat)")
     fit.add_argument("--calibration", type=Path, action="append", required=True, metavar="DIR",
                      help="OTHER nominal driving to set the thresholds on, at least an hour for the default rates "
                           "(repeat; never evaluation worlds)")
@@ -52,6 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ev.add_argument("--per-setting", type=int, default=EvalPlan.per_setting,
                     help="runs per perturbation intensity and per degraded model (default %(default)s)")
     ev.add_argument("--no-act", dest="act", action="store_false", help="skip the closed-loop runs with act")
+    ev.add_argument("--also", type=Path, action="append", default=[], metavar="M.onnx",
+                    help="another monitor to compare on the very same drives: the same steering model with another "
+                         "monitor attached (repeat)")
     ev.add_argument("--workers", type=int, default=EvalPlan.workers,
                     help="processes driving runs side by side (default %(default)s)")
     ev.add_argument("--cost-log", type=Path, default=None, metavar="DIR",
@@ -80,7 +88,7 @@ def _eval(args: argparse.Namespace) -> int:
         sample = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
         cost_log = sample if sample.is_dir() else None
     plan = EvalPlan(args.model, args.out, nominal=args.nominal, per_setting=args.per_setting, act=args.act,
-                    cost_log=cost_log, workers=args.workers)
+                    cost_log=cost_log, workers=args.workers, shadows=tuple(args.also))
     import logging
 
     if not logging.getLogger().isEnabledFor(logging.DEBUG):  # hundreds of runs: their state changes only with -v
@@ -109,7 +117,8 @@ def _fit(args: argparse.Namespace) -> int:
     for folder in [args.model, *args.data, *args.calibration]:
         if not folder.exists():
             raise CommandError(f"no such file or folder: {folder}")
-    plan = FitPlan(args.model, args.out, tuple(args.data), tuple(args.calibration), epochs=args.epochs,
+    plan = FitPlan(args.model, args.out, tuple(args.data), tuple(args.calibration), score=args.score,
+                   epochs=args.epochs,
                    stride=args.stride, seed=args.seed, warnings_per_hour=args.warnings_per_hour,
                    alarms_per_hour=args.alarms_per_hour)
     result = fit_monitor(plan, say=print)

@@ -28,6 +28,7 @@ class EvalPlan:
     act: bool = True  # also drive every run with --monitor act
     cost_log: Path | None = None  # recorded frames to time the server's pipeline on
     workers: int = 1  # processes driving runs side by side
+    shadows: tuple[Path, ...] = ()  # other monitors (files of the same steering model) scored on the same drives
     rules: ScoringRules = field(default_factory=ScoringRules)
 
     def specs(self) -> list[RunSpec]:
@@ -35,13 +36,14 @@ class EvalPlan:
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
-        return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
+        return {k: str(v) if isinstance(v, Path) else [str(x) for x in v] if k == "shadows" else v
+                for k, v in d.items()}
 
 
 def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
     from drive_server.model import SteeringModel
     from tools.monitoreval.cost import monitor_cost
-    from tools.monitoreval.report import closed_loop, figures, table_rows, tables
+    from tools.monitoreval.report import closed_loop, compare, figures, table_rows, tables
     from tools.monitoreval.runner import drive_all, file_digest
 
     found = SteeringModel(plan.model).monitor()
@@ -49,7 +51,13 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
         raise BadValue(f"{plan.model.name} carries no monitor (attach one with rbc monitor fit)")
     spec = found[0]
     modes = ("warn", "act") if plan.act else ("warn",)
-    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress, plan.workers)
+    shadow_specs = {}
+    for path in plan.shadows:
+        other = SteeringModel(path).monitor()
+        if other is None:
+            raise BadValue(f"{path.name} carries no monitor")
+        shadow_specs[path.name] = other[0]
+    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress, plan.workers, plan.shadows)
     record: dict[str, Any] = {
         "model": plan.model.name, "model_sha256": file_digest(plan.model),
         "monitor": {"score": spec.score, "warn": spec.warn, "alarm": spec.alarm, "window": spec.window,
@@ -58,6 +66,9 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
         "runs": {"total": len(results), "nominal": plan.nominal, "per_setting": plan.per_setting},
         "figures": figures(results, plan.rules),
         "closed_loop": closed_loop(results) if plan.act else {},
+        "monitors": compare(results, plan.rules, shadow_specs, f"{spec.score} ({plan.model.name}, drives)"),
+        "shadow_specs": {n: {"score": m.score, "warn": m.warn, "alarm": m.alarm, "window": m.window,
+                             "calibration": m.calibration} for n, m in shadow_specs.items()},
         "cost": monitor_cost(plan.model, plan.cost_log) if plan.cost_log is not None else None,
     }
     record["rows"] = table_rows(record)

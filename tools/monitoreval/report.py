@@ -74,6 +74,32 @@ def closed_loop(results: Sequence[tuple[RunSpec, str, dict[str, Any]]]) -> dict[
     return out
 
 
+def replayed(spec: RunSpec, run: dict[str, Any], name: str, monitor: Any) -> RunTrace:
+    """A shadow monitor's trace: its per-frame scores through the server's own state machine, with its
+    thresholds (``monitor``: its MonitorSpec)."""
+    from drive_server.monitor import MonitorState
+
+    state = MonitorState(monitor)
+    levels = np.array([int(state.update(v).level) for v in run["shadows"][name]], dtype=np.uint8)
+    base = trace(spec, run)
+    return RunTrace(base.name, base.group, base.t, levels, base.takeovers, base.sim_time_s, base.meta)
+
+
+def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules,
+            shadows: dict[str, Any], primary: str) -> list[dict[str, Any]]:
+    """Every monitor on the same ``warn`` drives, one row each (the driving one first)."""
+    warn = [(s, r) for s, m, r in results if m == "warn"]
+    out = []
+    for name, traces in [(primary, [trace(s, r) for s, r in warn]),
+                         *[(n, [replayed(s, r, n, spec) for s, r in warn]) for n, spec in shadows.items()]]:
+        f = score(traces, rules)
+        out.append({"monitor": name, "r1": _pct(f.recall_at["1"]), "r2": _pct(f.recall_at["2"]),
+                    "r3": _pct(f.recall_at["3"]), "r46": _pct(f.recall_4_6), "f3": f"{f.f3_1_3:.2f}",
+                    "lead1": _pct(f.lead_recall_at["1"]),
+                    "false": f"{f.false_per_hour:.2f} ({f.false_per_hour_upper95:.2f})", "figures": f.to_dict()})
+    return out
+
+
 def figures(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules) -> dict[str, Any]:
     """The monitor's figures on the ``warn`` runs (which drive exactly as without a monitor)."""
     traces = [trace(s, r) for s, m, r in results if m == "warn"]
@@ -129,6 +155,13 @@ def tables(record: dict[str, Any]) -> str:
             if off is not None and act is not None:
                 change = f" ({100 * ch:+.1f} %)" if ch is not None else ""
                 lines.append(f"| {label} ({c['nominal_runs']} runs) | {off:.2f}{unit} | {act:.2f}{unit}{change} |")
+    monitors = record.get("monitors") or []
+    if len(monitors) > 1:
+        lines += ["", "### Monitors compared on the same drives", "",
+                  "| monitor | recall 1 / 2 / 3 s | recall 4-6 s | F3 1-3 s | lead >= 1 s | false per hour (95 %) |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| {m['monitor']} | {m['r1']} / {m['r2']} / {m['r3']} | {m['r46']} | {m['f3']} | {m['lead1']} | "
+                  f"{m['false']} |" for m in monitors]
     cost = record.get("cost")
     if cost:
         lines += ["", "### Cost: drive_server's pipeline per frame, monitor off and on in one run", "",
@@ -180,4 +213,5 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
     if cost:
         costs = [{"monitor": name, "p50": f"{cost[key]['p50_ms']:.3f} ms", "p99": f"{cost[key]['p99_ms']:.3f} ms"}
                  for name, key in (("off", "off"), ("on (act)", "on"), ("added", "added"))]
-    return {"anchors": anchors, "deployment": deployment, "closed_loop": closed, "cost": costs}
+    return {"anchors": anchors, "deployment": deployment, "closed_loop": closed, "cost": costs,
+            "monitors": [{k: v for k, v in row.items() if k != "figures"} for row in record.get("monitors", [])]}

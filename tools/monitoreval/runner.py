@@ -62,14 +62,35 @@ class RunKey:
     mode: str
     model: str  # content digest of the file driven (the degraded copy for a degraded run)
     code: str
+    shadows: tuple[str, ...] = ()  # content digests of the monitors scored in the shadow of the driving one
 
     def text(self) -> str:
-        return json.dumps({"spec": self.spec.to_dict(), "mode": self.mode, "model": self.model, "code": self.code},
-                          sort_keys=True)
+        return json.dumps({"spec": self.spec.to_dict(), "mode": self.mode, "model": self.model, "code": self.code,
+                           "shadows": list(self.shadows)}, sort_keys=True)
 
 
-def drive(spec: RunSpec, model: Path, mode: str) -> dict[str, Any]:
-    """One run: the per-frame monitor state and one-second mean, the take-overs, and the lap's figures."""
+class _Shadowed:
+    """The driving monitor, and other monitors scored on the very same inputs (so monitors are compared on one
+    drive, not on two drives that differ); only the first acts."""
+
+    def __init__(self, primary: Any, shadows: list[Any]) -> None:
+        self.primary, self.shadows = primary, shadows
+        self.scores: list[list[float]] = [[] for _ in shadows]
+
+    def observe(self, x: np.ndarray) -> Any:
+        reading = self.primary.observe(x)
+        for graph, out in zip(self.shadows, self.scores, strict=True):
+            out.append(graph.score(x))
+        return reading
+
+    def __getattr__(self, name: str) -> Any:  # last, failed, state: the primary's
+        return getattr(self.primary, name)
+
+
+def drive(spec: RunSpec, model: Path, mode: str, shadows: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """One run: the per-frame monitor state and one-second mean, the take-overs, and the lap's figures; each
+    of ``shadows`` (model files with another monitor for the same steering input) scored on every frame too."""
+    from drive_server.model import SteeringModel
     from drive_server.monitor import MonitorMode, MonitorPolicy
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.model_rig import model_rig
@@ -77,7 +98,20 @@ def drive(spec: RunSpec, model: Path, mode: str) -> dict[str, Any]:
     from tools.sim.driving.session import run_scenario
     from tools.sim.worldgen import resolve_track_name
 
-    driver = OnnxDriver(model, monitor=MonitorPolicy(mode=MonitorMode(mode)))
+    graphs = []
+    for path in shadows:
+        found = SteeringModel(path).monitor()
+        if found is None:
+            raise BadValue(f"{path.name} carries no monitor")
+        graphs.append(found[1])
+
+    class Driver(OnnxDriver):
+        def start(self, scene: Any) -> None:
+            super().start(scene)
+            if self.monitor is not None and graphs:
+                self.monitor = _Shadowed(self.monitor, graphs)  # type: ignore[assignment]
+
+    driver = Driver(model, monitor=MonitorPolicy(mode=MonitorMode(mode)))
     if driver.monitor is None:
         raise BadValue(f"{model.name} carries no monitor (attach one with rbc monitor fit)")
     config = ScenarioConfig(track=resolve_track_name(spec.track), seed=spec.seed, light_intensity=spec.light_intensity,
@@ -92,7 +126,10 @@ def drive(spec: RunSpec, model: Path, mode: str) -> dict[str, Any]:
             "takeovers": [[round(i.t, 3), str(i.cause)] for lap_ in result.laps for i in lap_.interventions],
             "sim_time_s": result.sim_time_s, "eta": result.mean_eta, "completed": result.completed,
             "lap_time_s": lap.lap_time_s if lap else None, "mean_speed_kmh": lap.mean_speed_kmh if lap else None,
-            "monitor_failed": driver.monitor.failed if driver.monitor is not None else None}
+            "monitor_failed": driver.monitor.failed if driver.monitor is not None else None,
+            "shadows": {path.name: [round(float(v), 6) for v in values] for path, values
+                        in zip(shadows, driver.monitor.scores if isinstance(driver.monitor, _Shadowed) else [],
+                               strict=False)}}
 
 
 class Journal:
@@ -123,7 +160,7 @@ class Journal:
 
 def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Path,
               progress: Callable[[int, int, str], None] | None = None,
-              workers: int = 1) -> list[tuple[RunSpec, str, dict[str, Any]]]:
+              workers: int = 1, shadows: tuple[Path, ...] = ()) -> list[tuple[RunSpec, str, dict[str, Any]]]:
     """Every spec in every mode, resuming from ``out``'s journal; (spec, mode, run) in a fixed order whatever
     ``workers`` (processes driving runs side by side; each run is deterministic, so the order of finishing
     changes nothing but the journal's line order)."""
@@ -133,13 +170,14 @@ def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Pa
     journal = Journal(out / JOURNAL)
     code = code_digest(*RUN_CODE)
     models = out / "models"
+    shadow_digests = tuple(file_digest(p) for p in shadows)
     todo: dict[str, tuple[RunSpec, Path, str]] = {}
     order = []
     for spec in specs:
         path = degraded_model(model, models, spec.weight_noise, spec.seed) if spec.weight_noise else model
         digest = file_digest(path)
         for mode in modes:
-            key = RunKey(spec, mode, digest, code).text()
+            key = RunKey(spec, mode, digest, code, shadow_digests).text()
             order.append((spec, mode, key))
             if key not in journal.done:
                 todo[key] = (spec, path, mode)
@@ -157,11 +195,11 @@ def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Pa
 
     if workers <= 1 or len(todo) <= 1:
         for key, (spec, path, mode) in todo.items():
-            finished(key, drive(spec, path, mode))
+            finished(key, drive(spec, path, mode, shadows))
     else:
         context = multiprocessing.get_context("fork" if hasattr(os, "fork") else "spawn")
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
-            futures = {pool.submit(drive, spec, path, mode): key for key, (spec, path, mode) in todo.items()}
+            futures = {pool.submit(drive, spec, path, mode, shadows): key for key, (spec, path, mode) in todo.items()}
             try:
                 for future in concurrent.futures.as_completed(futures):
                     finished(futures[future], future.result())
