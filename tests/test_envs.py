@@ -491,3 +491,29 @@ def test_the_pages_keyword_list_names_every_argument():
     keywords = page[page.index("Keyword arguments of `gym.make`"):page.index("### Reward options")]
     missing = [f.name for f in fields(DriveEnvConfig) if f"`{f.name}`" not in keywords]
     assert missing == [] and "`render_mode`" in keywords
+
+
+def test_the_env_scores_each_observation_with_a_models_monitor(tmp_path):
+    """monitor=PATH: info["monitor"] holds the score, one-second mean and state of every observation, as
+    drive_server --monitor warn computes them; a file without a monitor is one line at make."""
+    import gymnasium as gym
+    from helpers_server import build_shallow
+    from test_monitor import _brightness_graph, _with_monitor
+
+    from drive_server.monitor import MonitorSpec
+    from protocol.errors import UserError
+
+    plain = build_shallow(tmp_path / "m.onnx")
+    model = _with_monitor(plain, tmp_path / "mon.onnx", MonitorSpec("brightness", -0.5, 0.45, 15),
+                          _brightness_graph())
+    env = gym.make("rbc/Drive-v0", monitor=str(model), max_episode_steps=20)
+    _, first = env.reset(seed=1)
+    assert first["monitor"]["state"] == "warning" and -0.5 < first["monitor"]["score"] < 0.5
+    _, _, _, _, info = env.step(np.zeros(1, np.float32))
+    both = (first["monitor"]["score"] + info["monitor"]["score"]) / 2  # the window's mean after two frames
+    assert info["monitor"]["mean"] == pytest.approx(both)
+    _, again = env.reset(seed=1)
+    assert again["monitor"]["mean"] == pytest.approx(first["monitor"]["score"])  # each episode starts afresh
+    env.close()
+    with pytest.raises(UserError, match="carries no misbehaviour monitor"):
+        gym.make("rbc/Drive-v0", monitor=str(plain))

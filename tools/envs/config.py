@@ -109,6 +109,9 @@ class DriveEnvConfig:
     # observation is the car there and info["intervention"] names the cause (DAgger: the learner drives on)
     terminate_on_takeover: bool = True
     reward: RewardConfig = field(default_factory=RewardConfig)  # or a dict of its fields
+    # an ONNX model file carrying a misbehaviour monitor (rbc monitor fit): each observation is scored as
+    # drive_server --monitor warn scores a frame, and info["monitor"] holds its score, one-second mean and state
+    monitor: str | None = None
 
     def __post_init__(self) -> None:
         _choice("camera", self.camera, tuple(RIGS))

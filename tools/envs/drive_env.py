@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 from collections import deque
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -73,6 +74,7 @@ class DriveEnv(gym.Env):
         self._frame: np.ndarray | None = None  # the centre camera as rendered, for render()
         self._closed = False
         self._last_info: dict[str, Any] | None = None  # the last step's, until reset() (see _relabel_auto_reset)
+        self._monitor_pipeline, self._monitor = self._load_monitor(config.monitor)
 
     # --- the Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -92,6 +94,8 @@ class DriveEnv(gym.Env):
                           spawn_noise=self.config.spawn_noise, cone_seed=int(options.get("cone_seed", 0)))
         self._pending = deque([SteerCommand(0.0, 0.0)] * self.config.action_delay)
         self._steps = 0
+        if self._monitor_pipeline is not None:
+            self._monitor = self._monitor_pipeline.client_monitor("env")  # each episode is a new client
         obs, jpeg = self._observe()
         info = self._info("", False, jpeg)
         self._relabel_auto_reset(info)
@@ -194,4 +198,34 @@ class DriveEnv(gym.Env):
         info["step"] = self._steps
         if jpeg:
             info["jpeg"] = jpeg  # the centre frame's JPEG as sent on the wire (OnnxPolicy decodes it as drive_server)
+        if self._monitor is not None and self._monitor_pipeline is not None and self._frame is not None:
+            reading = self._monitor.observe(self._monitor_input(jpeg))
+            info["monitor"] = None if reading is None else {"score": reading.score, "mean": reading.mean,
+                                                             "state": reading.level.label}
         return info
+
+    @staticmethod
+    def _load_monitor(path: str | None) -> tuple[Any, Any]:
+        """(the monitor's pipeline, None until reset) for ``monitor=PATH``; one line if the file has none."""
+        if path is None:
+            return None, None
+        from drive_server.model import SteeringModel
+        from drive_server.monitor import MonitorPolicy
+        from drive_server.pipeline import DriveConfig, DrivePipeline
+
+        pipeline = DrivePipeline(SteeringModel(Path(path)), DriveConfig(monitor=MonitorPolicy()))
+        if pipeline.monitor_spec is None:
+            raise BadValue(f"monitor={path}: the model file carries no misbehaviour monitor",
+                           "attach one with rbc monitor fit")
+        return pipeline, None
+
+    def _monitor_input(self, jpeg: bytes) -> np.ndarray:
+        """The centre frame as drive_server would prepare it for the monitor's model (decoded from the wire's JPEG
+        at the model's scale when there is one)."""
+        from drive_server.preprocess import preprocess
+        from protocol.jpeg import decode_jpeg
+
+        pipeline = self._monitor_pipeline
+        rgb = decode_jpeg(jpeg, pipeline.reduce) if jpeg else self._frame
+        assert rgb is not None  # _info scores only after a frame was rendered
+        return preprocess(rgb, pipeline.contract)
