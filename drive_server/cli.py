@@ -152,8 +152,8 @@ def main(argv: list[str] | None = None) -> int:
             raise BadValue(f"--ping-interval must be >= 1 s, got {args.ping_interval}")
         if not 0 <= args.port <= 65535:
             raise BadValue(f"--port must be in 0..65535, got {args.port}")
-        WireLimits(max_connections=args.max_connections, header_timeout_s=args.header_timeout,
-                   max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict)
+        limits = WireLimits(max_connections=args.max_connections, header_timeout_s=args.header_timeout,
+                            max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict)
     except UserError as exc:  # a bare ValueError here is a bug, and keeps its traceback
         return fail(exc)
     model_path = args.model
@@ -184,9 +184,7 @@ def main(argv: list[str] | None = None) -> int:
 
     tuning = TransportTuning.stock() if args.stock_transport else TransportTuning()
     config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
-                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval,
-                          max_connections=args.max_connections, header_timeout_s=args.header_timeout,
-                          max_pending_replies=args.max_pending, idle_evict_s=args.idle_evict,
+                          fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval, limits=limits,
                           dashboard=_dashboard_wanted(args, sock))
     log.info("model %s", model.describe())
     smooth, whose = (model.smooth, "the model's") if drive.smooth is None else (drive.smooth, "--smooth")

@@ -70,7 +70,7 @@ class DriveServer:
         self.sio = UnityCompatibleServer(
             async_mode=ASYNC_MODE, logger=False, engineio_logger=False,
             async_handlers=False,  # run each event in its reader greenthread: no greenthread spawn per frame
-            max_http_buffer_size=config.max_message_bytes, ping_interval=config.ping_interval_s,
+            max_http_buffer_size=config.limits.max_message_bytes, ping_interval=config.ping_interval_s,
             transports=list(config.transports),
         )
         self.transport = install(self.sio.eio, config.transport)

@@ -83,6 +83,34 @@ def test_missing_default_model_is_a_clear_error(monkeypatch, capsys, tmp_path):
     assert "unity.onnx" in err[0]
 
 
+def test_the_limit_flags_reach_the_server_as_one_wire_limits(monkeypatch, tmp_path):
+    """Issue 51: ServerConfig copied WireLimits' fields; now it nests the one object the command line built."""
+    from dataclasses import fields
+
+    import drive_server.server
+    from drive_server import cli
+    from drive_server.limits import WireLimits
+    from drive_server.server_config import ServerConfig
+    from protocol.errors import UserError
+
+    assert not {f.name for f in fields(WireLimits)} & {f.name for f in fields(ServerConfig)}
+    seen = []
+
+    class Stop(UserError):
+        pass
+
+    def capture(pipeline, config):
+        seen.append(config)
+        raise Stop("stop here")
+
+    monkeypatch.setattr(drive_server.server, "DriveServer", capture)
+    model = build_shallow(tmp_path / "m.onnx")
+    assert cli.main(["--model", str(model), "--port", "0", "--max-connections", "7", "--header-timeout", "3",
+                     "--max-pending", "5", "--idle-evict", "2"]) == 2
+    assert seen[0].limits == WireLimits(max_connections=7, header_timeout_s=3.0, max_pending_replies=5,
+                                        idle_evict_s=2.0)
+
+
 def test_default_model_path_is_the_bundled_package_file():
     path = default_model_path()
     assert path.name == "unity.onnx" and path.parent == REPO / "models" / "pretrained"
