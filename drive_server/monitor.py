@@ -148,6 +148,7 @@ class MonitorGraph:
         if len(inputs) != 1 or len(outputs) != 1:
             raise MonitorError(f"{name}: the monitor's graph must have one input and one output")
         self.input_name, self.output_name = inputs[0].name, outputs[0].name
+        self.model_bytes = model_bytes  # the graph as stored, for a fresh calibration (rbc monitor fit --score keep)
 
     def score(self, x: np.ndarray) -> float:
         """The score of one preprocessed input batch of 1 (raises whatever ONNX Runtime raises)."""

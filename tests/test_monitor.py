@@ -263,3 +263,37 @@ def test_the_unity_wire_is_unchanged_and_the_server_log_says_the_alarm(models):
     assert float(payload["throttle"]) == -1.0
     assert "monitor: brightness (act), warning at -0.5, alarm at -0.2" in log
     assert log.count("monitor alarm") == 1 and "Traceback" not in log
+
+
+@pytest.mark.slow
+def test_rbc_monitor_fit_attaches_a_calibrated_monitor_and_leaves_steering_alone(tmp_path, capsys):
+    """fit (autoencoder), a fresh calibration of it (keep) and the shift monitor, on the test recording: the written
+    file steers exactly as its source, carries the monitor, and the thresholds come from the calibration runs."""
+    import shutil
+
+    pytest.importorskip("torch")
+    from protocol import decode_image
+    from tools.cli import main
+
+    src = build_shallow(tmp_path / "m.onnx", seed=2)
+    calib = shutil.copytree(SAMPLE_LOG, tmp_path / "calib")  # other runs by path (the same frames: a test)
+    out = tmp_path / "mon.onnx"
+    assert main(["monitor", "fit", str(src), "--data", str(SAMPLE_LOG), "--calibration", str(calib),
+                 "--epochs", "1", "--out", str(out)]) == 0
+    assert "monitor autoencoder, warning at" in capsys.readouterr().out
+    spec = SteeringModel(out).monitor()[0]
+    assert spec.score == "autoencoder" and spec.calibration["frames"] == 36 and spec.calibration["short"]
+    assert spec.warn <= spec.alarm == pytest.approx(spec.calibration["nominal_max"])
+    rgb = decode_image(FRAMES[0].payload()["image"])
+    assert DrivePipeline(SteeringModel(out)).steer(rgb) == DrivePipeline(SteeringModel(src)).steer(rgb)
+    again = tmp_path / "again.onnx"
+    assert main(["monitor", "fit", str(out), "--score", "keep", "--calibration", str(calib),
+                 "--alarms-per-hour", "0.5", "--warnings-per-hour", "0.5", "--out", str(again)]) == 0
+    kept = SteeringModel(again).monitor()
+    assert kept[0].score == "autoencoder" and kept[0].calibration["recalibrated"]
+    assert kept[1].model_bytes == SteeringModel(out).monitor()[1].model_bytes
+    shift = tmp_path / "shift.onnx"
+    assert main(["monitor", "fit", str(src), "--score", "shift", "--calibration", str(calib), "--out",
+                 str(shift)]) == 0
+    assert SteeringModel(shift).monitor()[0].score == "shift"
+    assert main(["monitor", "fit", str(src), "--calibration", str(calib), "--out", str(tmp_path / "x.onnx")]) == 2

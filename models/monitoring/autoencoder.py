@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import logging
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -95,7 +96,10 @@ def export_score_graph(model: ConvAutoencoder, contract: PreprocessContract) -> 
     """The ONNX graph drive_server runs: the steering model's input (batch 1 or more) -> one score per frame."""
     example = torch.zeros(contract.input_shape, dtype=torch.float32)
     buffer = io.BytesIO()
-    torch.onnx.export(model.eval(), (example,), buffer,  # type: ignore[arg-type]  # a file object works (documented)
-                      input_names=["input"], output_names=["score"],
-                      dynamic_axes={"input": {0: "batch"}, "score": {0: "batch"}}, opset_version=17, dynamo=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the TorchScript exporter is deprecated but needs no onnxscript
+        torch.onnx.export(model.eval(), (example,), buffer,  # type: ignore[arg-type]  # a file object works
+                          input_names=["input"], output_names=["score"],
+                          dynamic_axes={"input": {0: "batch"}, "score": {0: "batch"}}, opset_version=17,
+                          dynamo=False)
     return buffer.getvalue()

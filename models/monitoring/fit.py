@@ -23,8 +23,9 @@ from protocol.errors import BadValue
 
 log = logging.getLogger(__name__)
 
-#: The scores ``rbc monitor fit`` can attach.
-SCORES = (AUTOENCODER, SHIFT)
+#: The scores ``rbc monitor fit`` can attach (``keep``: the model file's own monitor, calibrated afresh).
+KEEP = "keep"
+SCORES = (AUTOENCODER, SHIFT, KEEP)
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,9 @@ class FitPlan:
     out: Path
     train: tuple[Path, ...]
     calibration: tuple[Path, ...]
-    score: str = AUTOENCODER  # or "shift": the model's disagreement with itself on a moved frame (no training)
+    # or "shift": the model's disagreement with itself on a moved frame (no training); or "keep": the monitor the
+    # model file already carries, calibrated afresh (another target rate, other nominal driving)
+    score: str = AUTOENCODER
     epochs: int = 6
     stride: int = 2  # every 2nd training frame: neighbours at 15 Hz are near copies
     seed: int = 0
@@ -75,15 +78,24 @@ def fit_monitor(plan: FitPlan, say: Any = log.info) -> FitResult:
                                   progress=lambda e, n, loss: say(f"  epoch {e}/{n}: reconstruction error {loss:.5f}"))
         graph = export_score_graph(model, contract)
         record |= {"train_frames": int(len(train)), "train": [p.name for p in plan.train], "epochs": plan.epochs}
-    else:
+    elif plan.score == SHIFT:
         graph = shift_disagreement_graph(plan.model)
         record |= {"shift_pixels": SHIFT_PIXELS}
+    else:
+        found = SteeringModel(plan.model).monitor()
+        if found is None:
+            raise BadValue(f"{plan.model.name} carries no monitor to calibrate afresh (--score keep)")
+        old, graph_obj = found
+        graph = graph_obj.model_bytes
+        kept = {k: v for k, v in old.calibration.items() if k in ("train_frames", "train", "epochs", "shift_pixels",
+                                                                 "seed")}
+        record |= {**kept, "score": old.score, "recalibrated": True}
     say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
     runs = load_runs(list(plan.calibration), contract, 1, progress=lambda d, t: _every_tenth(say, d, t))
     cal = calibrate([graph_scores(graph, r) for r in runs], plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
                     source=", ".join(p.name for p in plan.calibration))
     record = {**cal.record, **record}
-    spec = MonitorSpec(plan.score, cal.warn, cal.alarm, plan.window, record)
+    spec = MonitorSpec(str(record["score"]), cal.warn, cal.alarm, plan.window, record)
     attach_monitor(plan.model, plan.out, spec, graph)
     return FitResult(spec, int(record.get("train_frames", 0)), record)
 

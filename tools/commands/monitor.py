@@ -30,8 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fit.add_argument("--out", type=Path, required=True, help="the model file with the monitor to write (.onnx)")
     fit.add_argument("--score", choices=SCORES, default=FitPlan.score,
                      help="autoencoder: SelfOracle's reconstruction error (trained on --data); shift: the model's "
-                          "disagreement with itself on the frame moved 3 pixels sideways (no training) "
-                          "(default %(default)s)")
+                          "disagreement with itself on the frame moved 3 pixels sideways (no training); keep: the "
+                          "monitor MODEL already carries, its thresholds set afresh (default %(default)s)")
     fit.add_argument("--data", type=Path, action="append", default=[], metavar="DIR",
                      help="nominal driving to train the autoencoder on (Udacity-format folder, e.g. from rbc collect; "
                           "repeat)")
