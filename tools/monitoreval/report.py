@@ -215,3 +215,30 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
                  for name, key in (("off", "off"), ("on (act)", "on"), ("added", "added"))]
     return {"anchors": anchors, "deployment": deployment, "closed_loop": closed, "cost": costs,
             "monitors": [{k: v for k, v in row.items() if k != "figures"} for row in record.get("monitors", [])]}
+
+
+#: The tables of the benchmark's results record (``results/monitor-eval.json``), over ``runs.0.output.rows``.
+RESULT_TABLES = {
+    "anchors": {"rows": "runs.0.output.rows.anchors",
+                "columns": [["monitor", "{monitor}"], ["recall 1 s", "{r1}"], ["recall 2 s", "{r2}"],
+                            ["recall 3 s", "{r3}"], ["recall 4-6 s", "{r46}"], ["F3 1-3 s", "{f3}"]]},
+    "monitors": {"rows": "runs.0.output.rows.monitors", "caption": "short",
+                 "columns": [["monitor", "{monitor}"], ["recall 1 / 2 / 3 s", "{r1} / {r2} / {r3}"],
+                             ["recall 4-6 s", "{r46}"], ["F3", "{f3}"], ["lead >= 1 s", "{lead1}"],
+                             ["false per hour (95 % bound)", "{false}"]]},
+    "deployment": {"rows": "runs.0.output.rows.deployment", "caption": "short",
+                   "columns": [["figure", "{figure}"], ["value", "{value}"]]},
+    "closed-loop": {"rows": "runs.0.output.rows.closed_loop", "caption": "short",
+                    "columns": [["figure", "{figure}"], ["--monitor warn", "{warn}"], ["--monitor act", "{act}"]]},
+    "cost": {"rows": "runs.0.output.rows.cost", "caption": "short",
+             "columns": [["monitor", "{monitor}"], ["p50", "{p50}"], ["p99", "{p99}"]]},
+}
+
+
+def results_record(record: dict[str, Any], command: str, machine: str, date: str, source: str) -> dict[str, Any]:
+    """The benchmark's record as a Results page record (``tools.results``): its figures, not its runs."""
+    keep = {k: v for k, v in record.items() if k != "figures"} | {"figures": {"all": record["figures"]["all"]}}
+    return {"title": "rbc monitor eval: the misbehaviour monitor on the headless simulator (held-out nominal "
+                     "driving, perturbed runs, degraded models), beside the published monitors",
+            "provenance": "transcribed", "source": source, "date": date, "code_version": record["code_version"],
+            "machine": machine, "runs": [{"command": command, "output": keep}], "tables": RESULT_TABLES}
