@@ -29,6 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
                    help="drive_server --speed-limit in km/h (default %(default)s)")
     add_vehicle_argument(p, ScenarioConfig.vehicle)
+    p.add_argument("--monitor", choices=("off", "warn", "act"), default="warn",
+                   help="drive_server --monitor: what the model's misbehaviour monitor does (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
     p.add_argument("--watch", action="store_true",
                    help="drive at the pace of the wall clock and print the live view's address, so the lap can "
@@ -69,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
     config = ScenarioConfig(track=setup.track, cones=setup.cones, cone_seed=setup.cone_seed, laps=args.laps,
                             speed_limit_kmh=args.speed_limit, vehicle=args.vehicle, camera=model_rig(model))
     strip = StripCollector(every_s=8.0)
-    server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0"],
-                           stats_json=stats_path)
+    server = ServerProcess(model, ["--speed-limit", str(args.speed_limit), "--log-every", "0",
+                                   "--monitor", args.monitor], stats_json=stats_path)
     try:
         url = server.start()
     except ServerStartError as exc:
