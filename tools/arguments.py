@@ -130,3 +130,13 @@ def add_moved_to_recipe_flags(parser: argparse.ArgumentParser) -> None:
     for key in REMOVED:
         parser.add_argument("--" + key.replace("_", "-"), action=MovedToRecipe,
                             where="was removed: it was measured useless (docs/experiments.md)")
+
+
+def add_monitor_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--monitor off|warn|act``: drive_server's flag of the same name, for a command that drives a model."""
+    from drive_server.monitor import MonitorMode, MonitorPolicy
+
+    parser.add_argument("--monitor", choices=[m.value for m in MonitorMode], default=MonitorPolicy.mode.value,
+                        help=f"{what}: the model's misbehaviour monitor, if its file carries one, as drive_server "
+                             "--monitor: off; warn (scored and reported, driving unchanged); act (also slows down "
+                             "on a warning and stops on an alarm) (default %(default)s)")

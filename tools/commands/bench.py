@@ -8,6 +8,7 @@ import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
+from tools.arguments import add_monitor_argument
 from tools.bench.latency import bench_one, format_table, load_frames
 from tools.errors import CommandError
 from tools.wire.server_process import ServerStartError
@@ -32,9 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stock-transport", action="store_true", help="start the server without transport tuning")
     p.add_argument("--record", type=Path, default=None, metavar="DIR",
                    help="start the server with --record DIR (what recording costs the round trip)")
-    p.add_argument("--monitor", choices=("off", "warn", "act"), default="warn",
-                   help="the started server's --monitor: what a model's misbehaviour monitor costs the round trip "
-                        "(default %(default)s, drive_server's own default)")
+    add_monitor_argument(p, "the started server's")
     p.add_argument("--json", type=Path, default=None, help="also write the results as JSON here")
 
 

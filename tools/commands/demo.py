@@ -13,7 +13,7 @@ import logging
 from pathlib import Path
 
 from protocol.facts import BEHAVIORS
-from tools.arguments import add_vehicle_argument
+from tools.arguments import add_monitor_argument, add_vehicle_argument
 from tools.errors import CommandError
 from tools.evaluate.experiments import SETUPS
 from tools.sim.driving.scenario import ScenarioConfig
@@ -29,8 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed-limit", type=float, default=ScenarioConfig.speed_limit_kmh,
                    help="drive_server --speed-limit in km/h (default %(default)s)")
     add_vehicle_argument(p, ScenarioConfig.vehicle)
-    p.add_argument("--monitor", choices=("off", "warn", "act"), default="warn",
-                   help="drive_server --monitor: what the model's misbehaviour monitor does (default %(default)s)")
+    add_monitor_argument(p, "the demo's server")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
     p.add_argument("--watch", action="store_true",
                    help="drive at the pace of the wall clock and print the live view's address, so the lap can "

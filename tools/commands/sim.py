@@ -7,8 +7,8 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from drive_server.pipeline import DriveConfig
-from tools.arguments import add_camera_argument, add_speed_unit_argument, add_vehicle_argument
+from drive_server.control import ControlLaw
+from tools.arguments import add_camera_argument, add_monitor_argument, add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.errors import CommandError
 from tools.sim.driving.pacing import hooks as on_frame_hooks
@@ -40,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--yaw-offset", type=float, default=d.yaw_offset_deg, metavar="DEG",
                    help="spawn heading offset (+ = left; default %(default)s)")
     p.add_argument("--reverse", action="store_true", help="spawn facing the other way and drive the lap reversed")
-    law = DriveConfig
+    law = ControlLaw
     p.add_argument("--speed-limit", type=float, default=d.speed_limit_kmh,
                    help="speed limit in km/h of the control law for --model (v_l of Eq. 14; default %(default)s)")
     p.add_argument("--steer-limit", type=float, default=law.steer_limit_deg,
@@ -49,9 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float, default=law.tau,
                    help="gain of the throttle/brake law for --model, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads for --model")
-    p.add_argument("--monitor", choices=("off", "warn", "act"), default="warn",
-                   help="with --model: its misbehaviour monitor, if its file carries one, as drive_server --monitor "
-                        "(default %(default)s: scored and summed up, driving unchanged)")
+    add_monitor_argument(p, "with --model")
     p.add_argument("--monitor-plot", type=Path, default=None, metavar="PNG",
                    help="with --model and a monitor: its score over the run, thresholds, warnings and take-overs")
     add_speed_unit_argument(p, d.speed_unit, "the telemetry speed sent to the driver")
@@ -79,8 +77,8 @@ def _driver(args: argparse.Namespace):
     if args.server:
         return SocketDriver(args.server)
     if args.model:
-        return OnnxDriver(args.model, speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
-                          tau=args.tau, speed_unit=args.speed_unit, threads=args.threads,
+        law = ControlLaw(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit, tau=args.tau)
+        return OnnxDriver(args.model, law=law, speed_unit=args.speed_unit, threads=args.threads,
                           monitor=MonitorPolicy(mode=MonitorMode(args.monitor)))
     return AutopilotDriver(speed_kmh=args.speed_limit, seed=args.seed)
 
