@@ -16,6 +16,7 @@ from typing import Any
 import cv2
 
 from drive_server import listen
+from drive_server.control import ControlLaw
 from drive_server.guard import FallbackPolicy
 from drive_server.helpformat import DefaultsHelpFormatter
 from drive_server.limits import WireLimits
@@ -41,14 +42,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "address exposes the car and its camera to the network, with a warning)")
     p.add_argument("--port", type=int, default=server.port,
                    help="port, 0..65535 (default 4567, the simulator's; 0 = any free); one owner per port")
-    drive, inference, fallback = DriveConfig, InferenceConfig, FallbackPolicy  # the defaults, defined once
-    p.add_argument("--speed-limit", type=float, default=drive.speed_limit_kmh,
+    drive, law, inference, fallback = DriveConfig, ControlLaw, InferenceConfig, FallbackPolicy  # the defaults
+    p.add_argument("--speed-limit", type=float, default=law.speed_limit_kmh,
                    help="speed limit in km/h of the throttle/brake control law "
                         "(v_l of Eq. 14; default %(default)s)")
-    p.add_argument("--steer-limit", type=float, default=drive.steer_limit_deg,
+    p.add_argument("--steer-limit", type=float, default=law.steer_limit_deg,
                    help="steering limit in degrees: scales the model's -1..1 output (delta of Eq. 14; "
                         "default %(default)s)")
-    p.add_argument("--tau", type=float, default=drive.tau,
+    p.add_argument("--tau", type=float, default=law.tau,
                    help="gain of the throttle/brake law, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--smooth", type=float, default=drive.smooth, metavar="ALPHA",
                    help="smooth each client's steering over time: every frame sends ALPHA of the model's new output "
@@ -138,10 +139,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     try:
-        drive = DriveConfig(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit, tau=args.tau,
+        drive = DriveConfig(law=ControlLaw(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
+                                           tau=args.tau),
                             speed_unit=SpeedUnit(args.telemetry_speed_unit), smooth=args.smooth,
                             monitor=MonitorPolicy(mode=MonitorMode(args.monitor), slow_factor=args.monitor_slow))
-        drive.control_law()
         inference = InferenceConfig(threads=args.threads, provider=args.provider)
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
         if args.workers < 1 or (args.workers > 1 and not hasattr(os, "fork")):
@@ -189,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     log.info("model %s", model.describe())
     smooth, whose = (model.smooth, "the model's") if drive.smooth is None else (drive.smooth, "--smooth")
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s%s",
-             drive.speed_limit_kmh, drive.steer_limit_deg, drive.tau, drive.speed_unit.value,
+             drive.law.speed_limit_kmh, drive.law.steer_limit_deg, drive.law.tau, drive.speed_unit.value,
              f", steering smoothed per client (alpha {smooth:g}, {whose})" if smooth < 1 else "")
     if monitor_found is not None:
         spec = monitor_found[0]

@@ -7,6 +7,8 @@ theta by delta = 25, which made the steering term ~25x too small; we do not copy
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass
 
 from protocol.errors import BadValue
@@ -22,12 +24,20 @@ class ControlLaw:
     tau: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.speed_limit_kmh <= 0:
-            raise BadValue(f"speed limit must be positive, got {self.speed_limit_kmh} km/h")
-        if self.steer_limit_deg <= 0:
-            raise BadValue(f"steering limit must be positive, got {self.steer_limit_deg} deg")
+        for name, value in (("speed_limit_kmh", self.speed_limit_kmh), ("steer_limit_deg", self.steer_limit_deg),
+                            ("tau", self.tau)):
+            if not isinstance(value, numbers.Real) or isinstance(value, bool):
+                raise BadValue(f"{name} must be a number, got {value!r}")
+        if not (math.isfinite(self.speed_limit_kmh) and self.speed_limit_kmh > 0):
+            raise BadValue(f"speed limit must be a positive number, got {self.speed_limit_kmh} km/h")
+        if not (math.isfinite(self.steer_limit_deg) and self.steer_limit_deg > 0):
+            raise BadValue(f"steering limit must be a positive number, got {self.steer_limit_deg} deg")
         if not 0.0 <= self.tau <= 1.0:
             raise BadValue(f"tau must be in [0, 1], got {self.tau}")
+
+    def steering_deg(self, normalised: float) -> float:
+        """The wheel angle in degrees of a normalised steering command (-1..1: full lock is ``steer_limit_deg``)."""
+        return normalised * self.steer_limit_deg
 
     def command(self, steering_deg: float, speed_kmh: float) -> float:
         """Throttle/brake command xi for a predicted steering angle (deg) and actual speed (km/h)."""

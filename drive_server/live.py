@@ -17,7 +17,8 @@ def server_view(server: Any) -> dict[str, Any]:
     cfg = pipeline.config
     return {
         "model": pipeline.model.path.name, "contract": pipeline.contract.__dict__,
-        "control": {"speed_limit_kmh": cfg.speed_limit_kmh, "steer_limit_deg": cfg.steer_limit_deg, "tau": cfg.tau,
+        "control": {"speed_limit_kmh": cfg.law.speed_limit_kmh, "steer_limit_deg": cfg.law.steer_limit_deg,
+                    "tau": cfg.law.tau,
                     "speed_unit": cfg.speed_unit.value, "smooth": pipeline.smooth},
         "monitor": _monitor_view(pipeline),
         "clients": len(server.clients), "viewers": server.dashboard.viewers if server.dashboard else 0,
@@ -45,7 +46,7 @@ def client_view(client: Any, cfg: Any, with_latency: bool, now: float) -> dict[s
     if frame is not None:
         entry["frame"] = {"image": frame.image_b64, "age_s": round(now - frame.t, 2),
                           "steering": round(frame.steering, 4),
-                          "steering_deg": round(frame.steering * cfg.steer_limit_deg, 2),
+                          "steering_deg": round(cfg.law.steering_deg(frame.steering), 2),
                           "throttle": round(frame.throttle, 4), "speed": round(frame.speed, 2),
                           "speed_kmh": round(to_kmh(frame.speed, cfg.speed_unit), 2), "fallback": frame.fallback}
         if frame.monitor is not None:

@@ -7,7 +7,7 @@ Preprocessing is whatever the model's contract says, through THE shared ``prepro
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from time import perf_counter
 
 import numpy as np
@@ -35,13 +35,11 @@ class InferenceError(UserError, RuntimeError):
 
 @dataclass(frozen=True)
 class DriveConfig:
-    """Control-law parameters, the unit of the telemetry speed (mph: the stock simulator) and the weight of each
+    """The control law (Eq. 14), the unit of the telemetry speed (mph: the stock simulator) and the weight of each
     new output in the per-client smoothing of the steering (``drive_server.smoothing``; 1: off; None: what the
     model's metadata asks for, off for a model without)."""
 
-    speed_limit_kmh: float = ControlLaw.speed_limit_kmh
-    steer_limit_deg: float = ControlLaw.steer_limit_deg
-    tau: float = ControlLaw.tau
+    law: ControlLaw = ControlLaw()
     speed_unit: SpeedUnit = SpeedUnit.MPH
     smooth: float | None = None
     monitor: MonitorPolicy = MonitorPolicy()  # what is done with the model's monitor, if it carries one
@@ -50,9 +48,6 @@ class DriveConfig:
         if self.smooth is not None:
             check_alpha(self.smooth)
 
-    def control_law(self) -> ControlLaw:
-        return ControlLaw(speed_limit_kmh=self.speed_limit_kmh, steer_limit_deg=self.steer_limit_deg, tau=self.tau)
-
 
 class DrivePipeline:
     """Stateless per frame (per-client state lives in the server): safe to share between clients."""
@@ -60,7 +55,7 @@ class DrivePipeline:
     def __init__(self, model: SteeringModel, config: DriveConfig = DriveConfig()) -> None:
         self.model = model
         self.config = config
-        self.law = config.control_law()
+        self.law = config.law
         self.contract = model.contract
         self.reduce = jpeg_reduction(model.contract)
         self.smooth = model.smooth if config.smooth is None else config.smooth
@@ -99,7 +94,7 @@ class DrivePipeline:
     def control(self, steering: float, speed: float, reading: MonitorReading | None = None) -> SteerCommand:
         """Eq. 14 on the predicted steering (converted to degrees) and the telemetry speed; with ``--monitor act``
         a monitor's warning lowers the speed limit and its alarm brakes (steering is never changed)."""
-        steering_deg, speed_kmh = steering * self.config.steer_limit_deg, to_kmh(speed, self.config.speed_unit)
+        steering_deg, speed_kmh = self.law.steering_deg(steering), to_kmh(speed, self.config.speed_unit)
         if reading is None or self.config.monitor.mode != "act" or reading.level == Level.NORMAL:
             return SteerCommand(steering=steering, throttle=self.law.command(steering_deg, speed_kmh))
         throttle = act_on(reading.level, self._throttle_at, steering_deg, speed_kmh, self.config.monitor)
@@ -109,8 +104,7 @@ class DrivePipeline:
         """Eq. 14 with the speed limit times ``factor`` (the monitor's slow-down)."""
         law = self.law if factor == 1.0 else self._slow_laws.get(factor)
         if law is None:
-            law = self._slow_laws[factor] = ControlLaw(self.law.speed_limit_kmh * factor, self.law.steer_limit_deg,
-                                                       self.law.tau)
+            law = self._slow_laws[factor] = replace(self.law, speed_limit_kmh=self.law.speed_limit_kmh * factor)
         return law.command(steering_deg, speed_kmh)
 
     def run(self, telemetry: Telemetry, smoother: SteeringSmoother | None = None,

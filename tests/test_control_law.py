@@ -43,6 +43,30 @@ def test_invalid_parameters(kwargs):
         ControlLaw(**kwargs)
 
 
+@pytest.mark.parametrize("kwargs", [{"speed_limit_kmh": float("nan")}, {"speed_limit_kmh": float("inf")},
+                                    {"steer_limit_deg": float("nan")}, {"tau": "1"}, {"tau": True}])
+def test_a_limit_that_is_no_number_is_refused(kwargs):
+    """A NaN speed limit made every throttle NaN (drive_server --speed-limit nan was accepted)."""
+    from protocol.errors import BadValue
+
+    with pytest.raises(BadValue):
+        ControlLaw(**kwargs)
+
+
+def test_one_law_nested_in_every_config_with_the_steering_conversion():
+    """Issue 51: the law's three numbers were copied into DriveConfig and the environment's config, and each
+    caller turned normalised steering into degrees by hand."""
+    from dataclasses import fields
+
+    from drive_server.pipeline import DriveConfig
+
+    law = ControlLaw(speed_limit_kmh=30.0, steer_limit_deg=20.0, tau=0.5)
+    assert law.steering_deg(0.5) == pytest.approx(10.0) and law.steering_deg(-1.0) == -20.0
+    assert DriveConfig(law=law).law is law
+    copies = [f.name for f in fields(DriveConfig) if f.name in {g.name for g in fields(ControlLaw)}]
+    assert copies == []
+
+
 def test_pipeline_converts_mph_and_normalised_steering(tmp_path):
     pytest.importorskip("onnx")
     from helpers_server import build_shallow

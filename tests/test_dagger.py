@@ -104,7 +104,7 @@ def test_every_visited_frame_is_labelled_by_the_expert(clean):
     from tools.envs import DriveEnv
 
     first = rollout.episodes(config, 0, 1)[0]
-    env = DriveEnv(world_seed=first.world_seed, spawn="random", action_delay=1, speed_limit_kmh=25.0)
+    env = DriveEnv(world_seed=first.world_seed, spawn="random", action_delay=1, law={"speed_limit_kmh": 25.0})
     _, info = env.reset(seed=first.reset_seed)
     assert float(_log(clean / "round-00" / "data")[0][3]) == pytest.approx(float(info["expert_action"][0]), abs=1e-6)
 

@@ -155,7 +155,7 @@ def test_steer_control_is_drive_servers_coupled_law(lake: DriveEnv):
         command = lake.command([steering])
         expected = pipeline.control(steering, lake.client.wire_speed())
         assert (command.steering, command.throttle) == (expected.steering, expected.throttle)
-    throttle_env = DriveEnv(track="lake", control="steer_throttle", speed_limit_kmh=5.0)
+    throttle_env = DriveEnv(track="lake", control="steer_throttle", law={"speed_limit_kmh": 5.0})
     _, info = throttle_env.reset(seed=0)
     for _ in range(60):
         _, _, _, _, info = throttle_env.step([0.0, 1.0])
@@ -174,11 +174,34 @@ def test_held_out_worlds_are_refused_for_training():
 
 
 @pytest.mark.parametrize("kwargs", [{"cameras": 2}, {"control": "throttle"}, {"camera": "fisheye"},
-                                    {"track": "lake", "world_seed": 3}, {"speed_limit_kmh": 0},
+                                    {"track": "lake", "world_seed": 3}, {"law": {"speed_limit_kmh": 0}},
+                                    {"law": {"speed_limit_kmh": float("nan")}}, {"law": {"tau": "1"}},
+                                    {"law": {"speed": 5}}, {"law": 25.0}, {"speed_limit_kmh": 5.0},
                                     {"max_episode_steps": 0}, {"no_such": 1}, {"action_delay": 2}])
 def test_bad_arguments_are_one_clear_error(kwargs):
     with pytest.raises(BadValue):
         DriveEnv(**kwargs)
+
+
+def test_the_control_law_is_one_argument_shared_with_drive_server():
+    """Issue 51: speed_limit_kmh, steer_limit_deg and tau were copies of drive_server's ControlLaw's fields."""
+    from dataclasses import fields
+
+    from drive_server.control import ControlLaw
+    from tools.envs.config import DriveEnvConfig
+
+    assert not {f.name for f in fields(ControlLaw)} & {f.name for f in fields(DriveEnvConfig)}
+    law = ControlLaw(speed_limit_kmh=12.0, tau=0.5)
+    assert DriveEnvConfig(law={"speed_limit_kmh": 12.0, "tau": 0.5}).law == law
+    assert DriveEnvConfig(law=law).law is law
+    with pytest.raises(BadValue, match="unknown law option.*: speed$") as exc:
+        DriveEnvConfig(law={"speed_limit_kmh": 12.0, "speed": 1})
+    assert "known: speed_limit_kmh" in exc.value.hint
+    from tools.envs.config import config_from_kwargs
+
+    with pytest.raises(BadValue) as exc:
+        config_from_kwargs({"speed_limit_kmh": 12.0})
+    assert "law={'speed_limit_kmh': ...}" in exc.value.hint
 
 
 def test_bad_actions_are_refused(lake: DriveEnv):

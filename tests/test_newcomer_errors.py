@@ -305,20 +305,20 @@ def test_only_the_class_not_its_name_chooses_the_hint():
 def test_drive_servers_boundary_keeps_a_bugs_traceback_and_gives_a_bad_values_hint(monkeypatch, capsys):
     """drive_server's own boundary caught every ValueError of its settings as bad input too."""
     import drive_server.cli as server_cli
-    from drive_server.pipeline import DriveConfig
+    from drive_server.control import ControlLaw
     from protocol.errors import BadValue
 
     def broken(self):
         raise ValueError("a bug in the control law's code")
 
-    monkeypatch.setattr(DriveConfig, "control_law", broken)
+    monkeypatch.setattr(ControlLaw, "__post_init__", broken)
     with pytest.raises(ValueError, match="a bug"):
         server_cli.main(["--port", "0"])
 
     def refused(self):
         raise BadValue("tau must be in [0, 1], got 2", hint="give --tau between 0 and 1")
 
-    monkeypatch.setattr(DriveConfig, "control_law", refused)
+    monkeypatch.setattr(ControlLaw, "__post_init__", refused)
     assert server_cli.main(["--port", "0"]) == 2
     assert capsys.readouterr().err.strip() == "drive_server: error: tau must be in [0, 1], got 2 (hint: give --tau " \
                                               "between 0 and 1)"

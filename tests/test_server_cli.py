@@ -63,6 +63,7 @@ def test_bad_model_files_exit_2_with_one_line(tmp_path):
 @pytest.mark.parametrize(("args", "words"), [
     (["--tau", "1.5"], "tau"),
     (["--speed-limit", "0"], "speed limit"),
+    (["--speed-limit", "nan"], "speed limit"),
     (["--threads", "0"], "threads"),
     (["--provider", "NoSuchExecutionProvider"], "not available"),
     (["--workers", "0"], "--workers"),

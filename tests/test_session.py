@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drive_server.control import ControlLaw
 from protocol import SteerCommand
 from protocol.facts import COLLECT_SPEED_KMH
 from tools.sim.driving.drivers import AutopilotDriver, Frame, LocalDriver, OnnxDriver, Reply, Scene, SocketDriver
@@ -176,7 +177,7 @@ def test_socket_lap_against_the_real_drive_server(drive_server):
 
 def test_same_model_same_lap_over_the_socket_and_in_process(drive_server, random_model):
     over_socket = run_scenario(E2E, SocketDriver(drive_server))
-    in_process = run_scenario(E2E, OnnxDriver(random_model, speed_limit_kmh=E2E.speed_limit_kmh))
+    in_process = run_scenario(E2E, OnnxDriver(random_model, ControlLaw(E2E.speed_limit_kmh)))
     assert over_socket.to_dict()["laps"] == in_process.to_dict()["laps"]
     assert np.array_equal(over_socket.trace.x, in_process.trace.x)
 

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from drive_server.control import ControlLaw
 from drive_server.runrecords import write_json
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name
 from protocol.errors import BadValue
@@ -92,7 +93,8 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
         raise BadValue(f"round {round_} mixes in a learner (beta {beta:g}) but none was given")
     total = config.new_frames(round_)
     plan = episodes(config, round_, -(-total // config.episode_steps))
-    policy = OnnxPolicy(learner, speed_limit_kmh=config.speed_limit_kmh) if learner is not None else None
+    law = ControlLaw(speed_limit_kmh=config.speed_limit_kmh)  # Eq. 14 of the environment and of the learner
+    policy = OnnxPolicy(learner, law=law) if learner is not None else None
     if policy is not None and policy.camera_rig != config.camera:
         raise BadValue(f"the learner {learner} was trained on the {policy.camera_rig} camera, the data is "
                        f"recorded with {config.camera}")
@@ -113,7 +115,7 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
     with LogWriter(partial / LOG_NAME) as writer:
         for number, episode in enumerate(plan):
             env = gym.make(ENV_ID, world_seed=episode.world_seed, purpose="train", spawn="random",
-                           cameras=config.cameras, camera=config.camera, speed_limit_kmh=config.speed_limit_kmh,
+                           cameras=config.cameras, camera=config.camera, law=law,
                            action_delay=config.action_delay, max_episode_steps=config.episode_steps,
                            terminate_on_takeover=False, disable_env_checker=True)
             drive = cast("DriveEnv", env.unwrapped)  # what gym.make builds for ENV_ID

@@ -18,11 +18,11 @@ other import. Ten lines with the autopilot driving::
 Keyword arguments (:class:`DriveEnvConfig`): ``track`` (a built-in name, a track file or ``world:SEED``) or
 ``world_seed``; ``purpose`` ("train" refuses evaluation worlds as ``rbc collect`` does, "eval" allows them);
 ``camera`` (the rig: "unity", "classic"); ``cameras`` (1 or 3); ``control`` ("steer": throttle and brake from
-the paper's Eq. 14 exactly as drive_server computes them, or "steer_throttle"); ``speed_limit_kmh``
-(Eq. 14's v_l, a governor with steer_throttle); ``jpeg`` (default True: the wire's JPEG round trip);
-``laps``; ``max_episode_steps``; ``spawn`` ("start" or "random"); ``action_delay`` (1: Unity's two frames in
-flight); ``render_mode`` (None, "rgb_array": the centre camera as rendered, or "human": in a window, with
-pygame); and more in the config.
+the paper's Eq. 14 exactly as drive_server computes them, or "steer_throttle"); ``law`` (drive_server's
+``ControlLaw`` or a dict of its fields; its speed limit is a governor with steer_throttle too); ``jpeg``
+(default True: the wire's JPEG round trip); ``laps``; ``max_episode_steps``; ``spawn`` ("start" or "random");
+``action_delay`` (1: Unity's two frames in flight); ``render_mode`` (None, "rgb_array": the centre camera as
+rendered, or "human": in a window, with pygame); and more in the config.
 
 Spaces: the observation is the centre camera's frame, uint8 (160, 320, 3) RGB, decoded from the JPEG the
 simulator would send (``jpeg=True``, the pixels drive_server and recorded datasets have); with ``cameras=3`` a

@@ -90,9 +90,8 @@ class DriveEnvConfig:
     camera: str = ScenarioConfig.camera  # the camera rig (tools.sim.render.camera.RIGS)
     cameras: int = 1  # 1: centre only; 3: a Dict observation of centre, left and right
     control: str = "steer"  # "steer": throttle and brake from Eq. 14 as drive_server; "steer_throttle": both actions
-    speed_limit_kmh: float = ControlLaw.speed_limit_kmh  # v_l of Eq. 14; a governor in steer_throttle
-    steer_limit_deg: float = ControlLaw.steer_limit_deg  # delta of Eq. 14
-    tau: float = ControlLaw.tau  # gain of Eq. 14
+    # Eq. 14 (drive_server's own ControlLaw, or a dict of its fields); its speed limit is a governor in steer_throttle
+    law: ControlLaw = ControlLaw()
     jpeg: bool = True  # observe the frame after the wire's JPEG round trip (what drive_server and recordings see)
     laps: int = 1  # the episode is truncated after this many laps
     max_episode_steps: int | None = None  # truncated after this many steps (None: only the lap and its time limit)
@@ -121,12 +120,8 @@ class DriveEnvConfig:
         _choice("vehicle", self.vehicle, VEHICLE_KINDS)
         if self.cameras not in (1, 3):
             raise BadValue(f"cameras must be 1 or 3, got {self.cameras!r}")
-        for name in ("speed_limit_kmh", "steer_limit_deg", "control_hz"):
-            value = getattr(self, name)
-            if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
-                raise BadValue(f"{name} must be a positive number, got {value!r}")
-        if not 0.0 <= self.tau <= 1.0:
-            raise BadValue(f"tau must be in [0, 1], got {self.tau!r}")
+        if not isinstance(self.control_hz, int | float) or not math.isfinite(self.control_hz) or self.control_hz <= 0:
+            raise BadValue(f"control_hz must be a positive number, got {self.control_hz!r}")
         ratio = ScenarioConfig.sim_fps / self.control_hz
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
             raise BadValue(f"control_hz must divide the simulator's {ScenarioConfig.sim_fps} Hz, got {self.control_hz}")
@@ -147,6 +142,7 @@ class DriveEnvConfig:
             raise BadValue("give track or world_seed, not both",
                            "world_seed=S is the procedural world S; track='world:S' names the same world")
         object.__setattr__(self, "reward", RewardConfig.of(self.reward))
+        object.__setattr__(self, "law", _law_of(self.law))
 
     @property
     def track_name(self) -> str:
@@ -159,9 +155,18 @@ class DriveEnvConfig:
     def frames_per_step(self) -> int:
         return round(ScenarioConfig.sim_fps / self.control_hz)
 
-    def law(self) -> ControlLaw:
-        """Eq. 14 with this environment's parameters (drive_server's own class)."""
-        return ControlLaw(speed_limit_kmh=self.speed_limit_kmh, steer_limit_deg=self.steer_limit_deg, tau=self.tau)
+
+def _law_of(value: object) -> ControlLaw:
+    """A ControlLaw from itself or a mapping of its fields (an unknown key is a BadValue naming the known)."""
+    if isinstance(value, ControlLaw):
+        return value
+    if not isinstance(value, dict):
+        raise BadValue(f"law must be a drive_server.control.ControlLaw or a dict of its fields, got {value!r}")
+    known = [f.name for f in fields(ControlLaw)]
+    unknown = sorted(set(value) - set(known))
+    if unknown:
+        raise BadValue(f"unknown law option(s): {', '.join(map(str, unknown))}", f"known: {', '.join(known)}")
+    return ControlLaw(**value)
 
 
 def _choice(name: str, value: object, allowed: tuple[str, ...]) -> None:
@@ -174,8 +179,10 @@ def config_from_kwargs(kwargs: dict[str, object]) -> DriveEnvConfig:
     known = {f.name for f in fields(DriveEnvConfig)}
     unknown = sorted(set(kwargs) - known)
     if unknown:
-        raise BadValue(f"unknown argument(s) of rbc/Drive-v0: {', '.join(unknown)}",
-                       f"known: render_mode, {', '.join(sorted(known))}")
+        moved = sorted(set(unknown) & {f.name for f in fields(ControlLaw)})
+        hint = (f"the control law's parameters are one argument: law={{'{moved[0]}': ...}}" if moved
+                else f"known: render_mode, {', '.join(sorted(known))}")
+        raise BadValue(f"unknown argument(s) of rbc/Drive-v0: {', '.join(unknown)}", hint)
     return DriveEnvConfig(**kwargs)  # type: ignore[arg-type]
 
 

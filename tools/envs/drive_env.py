@@ -58,7 +58,7 @@ class DriveEnv(gym.Env):
         self.render_mode = render_mode
         self.config = config = config_from_kwargs(kwargs)
         self.metadata = {**self.metadata, "render_fps": config.control_hz}
-        self.law = config.law()
+        self.law = config.law
         frame = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
         self.camera_names = CAMERAS if config.cameras == 3 else ("center",)
         self.observation_space = spaces.Dict({c: frame for c in self.camera_names}) if config.cameras == 3 else frame
@@ -66,7 +66,7 @@ class DriveEnv(gym.Env):
         self.action_space: spaces.Box = spaces.Box(-1.0, 1.0, (size,), np.float32)
         self.client = HeadlessSimClient(
             resolve_track(config), config.camera, self.camera_names, config.jpeg, laps=config.laps,
-            vehicle=config.vehicle, speed_limit_kmh=config.speed_limit_kmh, control_hz=config.control_hz,
+            vehicle=config.vehicle, speed_limit_kmh=config.law.speed_limit_kmh, control_hz=config.control_hz,
             max_lap_time_s=config.max_lap_time_s, light_intensity=config.light_intensity, cones=config.cones,
             reverse=config.reverse)
         self._pending: deque[SteerCommand] = deque()
@@ -148,10 +148,10 @@ class DriveEnv(gym.Env):
         steering = float(a[0])
         speed_kmh = self.client.wire_speed_kmh()
         if self.config.control == "steer":
-            throttle = self.law.command(steering * self.law.steer_limit_deg, speed_kmh)
+            throttle = self.law.command(self.law.steering_deg(steering), speed_kmh)
         else:
             throttle = float(a[1])
-            if speed_kmh >= self.config.speed_limit_kmh:
+            if speed_kmh >= self.law.speed_limit_kmh:
                 throttle = min(throttle, 0.0)
         return SteerCommand(steering=steering, throttle=throttle)
 
@@ -161,7 +161,7 @@ class DriveEnv(gym.Env):
         steering = self.client.expert_steering()
         if self.config.control == "steer":
             return np.array([steering], np.float32)
-        throttle = self.law.command(steering * self.law.steer_limit_deg, self.client.wire_speed_kmh())
+        throttle = self.law.command(self.law.steering_deg(steering), self.client.wire_speed_kmh())
         return np.array([steering, throttle], np.float32)
 
     def _relabel_auto_reset(self, info: dict[str, Any]) -> None:

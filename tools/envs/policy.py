@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from drive_server.control import ControlLaw
 from drive_server.model import InferenceConfig, SteeringModel
 from drive_server.pipeline import DriveConfig, DrivePipeline
 from drive_server.smoothing import SteeringSmoother
@@ -24,21 +25,19 @@ from tools.sim.driving.model_rig import model_rig
 
 class OnnxPolicy:
     """``policy(obs, info) -> action`` for an environment made with the same ``control`` (and, for
-    ``steer_throttle``, the same Eq. 14 parameters) and ``camera=policy.camera_rig``. Without ``info["jpeg"]``
-    (``jpeg=False``) the model reads the full-size frame, resized by its contract: within a few grey levels of
-    what drive_server would feed it."""
+    ``steer_throttle``, the same ``law``, Eq. 14; None: the default) and ``camera=policy.camera_rig``. Without
+    ``info["jpeg"]`` (``jpeg=False``) the model reads the full-size frame, resized by its contract: within a few
+    grey levels of what drive_server would feed it."""
 
     def __init__(self, path: str | Path, control: str = "steer", smooth: float | None = None, threads: int = 1,
-                 speed_limit_kmh: float = DriveConfig.speed_limit_kmh,
-                 steer_limit_deg: float = DriveConfig.steer_limit_deg, tau: float = DriveConfig.tau) -> None:
+                 law: ControlLaw | None = None) -> None:
         if control not in CONTROLS:
             raise BadValue(f"control must be one of {', '.join(CONTROLS)}, got {control!r}")
         model = SteeringModel(Path(path), InferenceConfig(threads=threads))
         model.warm_up()
         self.control = control
-        self.pipeline = DrivePipeline(model, DriveConfig(speed_limit_kmh=speed_limit_kmh,
-                                                         steer_limit_deg=steer_limit_deg, tau=tau,
-                                                         speed_unit=SpeedUnit.KMH, smooth=smooth))
+        self.pipeline = DrivePipeline(model, DriveConfig(law=law or ControlLaw(), speed_unit=SpeedUnit.KMH,
+                                                         smooth=smooth))
         self.smoother: SteeringSmoother | None = self.pipeline.smoother()
         #: the camera rig the model learnt (its record; ``rbc sim --model`` shows it the same): make the env with it
         self.camera_rig = model_rig(path)

@@ -14,12 +14,12 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from drive_server.control import ControlLaw
 from protocol.appending import append_record
-from protocol.facts import MAX_STEERING_DEG
 
 log = logging.getLogger(__name__)
 
@@ -31,8 +31,7 @@ class DriverSpec:
     model: str | None = None
     server: str | None = None
     threads: int = 1
-    steer_limit_deg: float = MAX_STEERING_DEG
-    tau: float = 1.0
+    law: ControlLaw = ControlLaw()  # Eq. 14 of an in-process model; its speed limit is each scenario's
 
     def __post_init__(self) -> None:
         if self.model is None and self.server is None:
@@ -66,8 +65,8 @@ def _driver(spec: DriverSpec, speed_limit_kmh: float):
         if spec.server:
             _DRIVERS[key] = SocketDriver(spec.server)
         elif spec.model:
-            _DRIVERS[key] = OnnxDriver(spec.model, speed_limit_kmh=speed_limit_kmh,
-                                       steer_limit_deg=spec.steer_limit_deg, tau=spec.tau, threads=spec.threads)
+            law = replace(spec.law, speed_limit_kmh=speed_limit_kmh)  # the scenario's speed limit
+            _DRIVERS[key] = OnnxDriver(spec.model, law=law, threads=spec.threads)
         else:
             raise ValueError("give a model (in-process) or a server URL")
     return _DRIVERS[key]

@@ -23,8 +23,9 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from drive_server.control import ControlLaw
 from protocol import SpeedUnit, SteerCommand, Telemetry, encode_steer, parse_steer, parse_telemetry
-from protocol.facts import COLLECT_SPEED_KMH, DEPLOY_SPEED_KMH, MAX_STEERING_DEG
+from protocol.facts import COLLECT_SPEED_KMH
 from tools.sim.track.road import Track
 from tools.sim.vehicle.kinematic import VehicleParams, VehicleState
 
@@ -124,9 +125,8 @@ class OnnxDriver(LocalDriver):
     """An ONNX steering model in-process: the drive server's own pipeline (decode, preprocess, infer,
     Eq. 14) without the socket."""
 
-    def __init__(self, model_path: str | Path, speed_limit_kmh: float = DEPLOY_SPEED_KMH,
-                 steer_limit_deg: float = MAX_STEERING_DEG,
-                 tau: float = 1.0, speed_unit: SpeedUnit | str = SpeedUnit.MPH, threads: int = 1,
+    def __init__(self, model_path: str | Path, law: ControlLaw | None = None,
+                 speed_unit: SpeedUnit | str = SpeedUnit.MPH, threads: int = 1,
                  monitor: MonitorPolicy | None = None) -> None:
         from drive_server.model import InferenceConfig, SteeringModel
         from drive_server.monitor import MonitorMode, MonitorPolicy
@@ -135,9 +135,7 @@ class OnnxDriver(LocalDriver):
         super().__init__()
         model = SteeringModel(Path(model_path), InferenceConfig(threads=threads))
         model.warm_up()
-        self.pipeline = DrivePipeline(model, DriveConfig(speed_limit_kmh=speed_limit_kmh,
-                                                         steer_limit_deg=steer_limit_deg, tau=tau,
-                                                         speed_unit=SpeedUnit(speed_unit),
+        self.pipeline = DrivePipeline(model, DriveConfig(law=law or ControlLaw(), speed_unit=SpeedUnit(speed_unit),
                                                          monitor=monitor or MonitorPolicy(mode=MonitorMode.OFF)))
         self.smoother = self.pipeline.smoother()  # one driver is one client: smoothed as the model asks
         self.monitor = self.pipeline.client_monitor()  # None: no monitor in the file, or off
