@@ -299,7 +299,7 @@ def test_a_fold_model_is_trained_again_when_its_recipe_data_or_code_changed(
         out = Path(cfg.out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "model.onnx").write_bytes(b"onnx")
-        (out / "config.json").write_text('{"result": {}}', encoding="utf-8")
+        (out / "config.json").write_text('{"config": {}, "result": {}}', encoding="utf-8")
         return type("R", (), {"interrupted": False, "onnx": out / "model.onnx"})()
 
     monkeypatch.setattr(train_module, "train", fake_train)

@@ -209,8 +209,8 @@ def test_train_stops_on_a_full_disk_keeps_its_last_checkpoint_and_resume_ends_as
     small_disk.free()
     assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
     resumed = read_history(run / "history.csv")
-    assert [h["train_loss"] for h in resumed] == pytest.approx([h["train_loss"] for h in clean], rel=1e-6)
-    assert [h["val_loss"] for h in resumed] == pytest.approx([h["val_loss"] for h in clean], rel=1e-6)
+    assert [h.train_loss for h in resumed] == pytest.approx([h.train_loss for h in clean], rel=1e-6)
+    assert [h.val_loss for h in resumed] == pytest.approx([h.val_loss for h in clean], rel=1e-6)
 
 
 # ------------------------------------------------------------------------------------------------ rbc eval

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ast
 import base64
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -461,3 +462,35 @@ def test_a_typo_in_a_flag_shows_the_subcommands_usage(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith("usage: rbc sim") and "--tarck" in err
+
+
+#: A training run's file names: :mod:`models.networks.runfiles` names them, every other module asks it.
+RUN_FILE_NAME = re.compile(r"(?<![\w.-])(config\.json|history\.csv|checkpoint\.pt|model\.onnx)\b")
+
+
+def _run_file_names(path: Path) -> list[str]:
+    """``line: text`` of every string of the file's code that names a run's file. Docstrings and comments are the
+    file's documentation and may name them; a help string or a message asks runfiles for the name."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+                  and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    return [f"{node.lineno}: {node.value!r}" for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
+            and RUN_FILE_NAME.search(node.value)]
+
+
+def test_only_runfiles_spells_a_training_runs_file_names():
+    """Issue 51: DAgger, drive-log and the model card wrote ``config.json``, ``history.csv``, ``checkpoint.pt`` and
+    ``model.onnx`` again (DAgger parsed history.csv with split(",")); now they read a RunRecord."""
+    where = {name: hits for name, path in MODULES.items() if name != "models.networks.runfiles"
+             for hits in [_run_file_names(path)] if hits}
+    assert where == {}
+
+
+def test_the_run_file_check_finds_a_spelled_name(tmp_path):
+    spelled = tmp_path / "spelled.py"
+    spelled.write_text('"""Reads config.json."""\nPATH = "runs/x/model.onnx"\nOTHER = "mymodel.onnx fold.json"\n'
+                       'def f(d):\n    """Its history.csv."""\n'
+                       '    return f"{d}/checkpoint.pt", "history.csv"  # config.json\n')
+    assert sorted(_run_file_names(spelled)) == ["2: 'runs/x/model.onnx'", "6: '/checkpoint.pt'", "6: 'history.csv'"]

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from models.networks.runfiles import RunRecord
 from models.onnxfiles.model_card import CardSource, ModelFile, card
 from models.training.recipe import load_recipe, recipe_sections
 from models.training.train_config import TrainConfig
@@ -66,7 +67,7 @@ def _card(record: dict, model: str = "models/pretrained/x.onnx", recipe_name: st
     info = {"parameters": 14065, "camera_rig": "unity", "mirror_average": c["mirror_average"], **info}
     smooth = info.pop("smooth", c["serve_smoothing"])
     home = {"rigorous": "--track mountain", "collision": "--track lake --cones 20 --cone-seed 1"}
-    return card(CardSource(record, ModelFile(Path(model), info, record["contract"], smooth),
+    return card(CardSource(RunRecord.from_dict(record), ModelFile(Path(model), info, record["contract"], smooth),
                            Path(model).with_suffix(".toml"), home.get(c["behavior"], "--track lake"),
                            recipe_name=recipe_name))
 

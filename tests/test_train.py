@@ -23,6 +23,7 @@ from drive_server.preprocess import preprocess, to_input_tensor  # noqa: E402
 from models.data.framecache import build_cache, load_frame  # noqa: E402
 from models.networks.checkpoint import exported_weights  # noqa: E402
 from models.networks.nets import ContractInput, build_model  # noqa: E402
+from models.networks.runfiles import RunRecord  # noqa: E402
 from models.training import train as train_mod  # noqa: E402
 from models.training.train import RunDirError, TrainConfig, steps_per_epoch, train  # noqa: E402
 from protocol.datalog import read_log  # noqa: E402
@@ -71,6 +72,19 @@ def test_run_directory_contents(run) -> None:
     assert run.val_loss == pytest.approx(float(rows[best]["val_loss"]))
     assert record["result"]["exported_epoch"] == best + 1
     assert not list(d.glob(".*.tmp"))
+
+
+def test_the_run_record_reads_what_training_wrote(run) -> None:
+    """Issue 51: training, DAgger, drive-log, the model card and inspect read a run through one RunRecord."""
+    record = RunRecord.load(run.run_dir)
+    stored = json.loads((run.run_dir / "config.json").read_text())
+    assert record.config == stored["config"] and record.resolved == stored["resolved"]
+    assert record.result == stored["result"] and record.rows == stored["rows"] and record.logs == stored["logs"]
+    assert record.recipe == stored["recipe"] and record.contract == stored["contract"]
+    assert [h.as_dict() for h in record.history] == run.history  # typed rows, the values training kept
+    assert all(isinstance(h.epoch, int) for h in record.history) and record.last_epoch.epoch == 2
+    assert record.model_path == run.onnx and record.checkpoint_path.is_file() and record.finished
+    assert TrainConfig.from_dict(record.config) == TrainConfig.from_dict(stored["config"])
 
 
 def test_onnx_export_carries_the_contract_and_matches_pytorch(run) -> None:

@@ -1,15 +1,19 @@
-"""Files of a training run (config, history, checkpoint, model), written through the atomic writers
-of :mod:`drive_server.runrecords`, so a crash or Ctrl-C never leaves half a file behind."""
+"""A training run's folder: the one module that names its files (config, history, checkpoint, model), reads them
+into a typed :class:`RunRecord` and writes them through the atomic writers of :mod:`drive_server.runrecords`, so a
+crash or Ctrl-C never leaves half a file behind and no other module spells a file name or a record's keys again."""
 
 from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Sequence
+import json
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import write_text
+from drive_server.runrecords import write_json, write_text
+from protocol.errors import BadValue, UserError
 
 CONFIG = "config.json"
 HISTORY = "history.csv"
@@ -18,15 +22,173 @@ MODEL = "model.onnx"
 HISTORY_FIELDS = ("epoch", "train_loss", "val_loss", "seconds")
 
 
-def write_history(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+class NotARunError(UserError):
+    """A folder that holds no training run's record (or one that is not JSON of the right shape)."""
+
+    hint = "give the folder rbc train --out wrote"
+
+
+@dataclass(frozen=True)
+class EpochRow:
+    """One line of ``history.csv``: an epoch's mean training loss, validation loss and wall seconds."""
+
+    epoch: int
+    train_loss: float
+    val_loss: float
+    seconds: float
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class RunPaths:
+    """Where a run's files lie (whether or not they are there yet)."""
+
+    run_dir: Path
+
+    @property
+    def config(self) -> Path:
+        return self.run_dir / CONFIG
+
+    @property
+    def history(self) -> Path:
+        return self.run_dir / HISTORY
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.run_dir / CHECKPOINT
+
+    @property
+    def model(self) -> Path:
+        return self.run_dir / MODEL
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a training run recorded: its configuration record (what ``rbc train`` wrote before training and the
+    result it added after the export) and its per-epoch history. ``record`` is the whole record as written; the
+    properties name its parts, so no reader spells a key of it."""
+
+    run_dir: Path
+    record: Mapping[str, Any]
+    history: tuple[EpochRow, ...] = field(default=())
+
+    @classmethod
+    def load(cls, run_dir: str | Path) -> RunRecord:
+        """The run in ``run_dir``; :class:`NotARunError` when it holds no run's record."""
+        paths = RunPaths(Path(run_dir))
+        if not paths.config.is_file():
+            raise NotARunError(f"{paths.run_dir}: not a training run folder (no {CONFIG})")
+        try:
+            record = json.loads(paths.config.read_text(encoding="utf-8"))
+        except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError
+            raise NotARunError(f"{paths.config}: not a training run's config (not JSON: {exc})") from None
+        history = read_history(paths.history) if paths.history.is_file() else []
+        return cls.from_dict(record, paths.run_dir, history)
+
+    @classmethod
+    def from_dict(cls, record: Any, run_dir: str | Path = ".", history: Iterable[EpochRow] = ()) -> RunRecord:
+        """A record as training writes it (``config`` an object); :class:`NotARunError` for anything else."""
+        where = Path(run_dir) / CONFIG
+        if not isinstance(record, dict):
+            raise NotARunError(f"{where}: not a training run's config (a JSON {type(record).__name__})")
+        if not isinstance(record.get("config"), dict):
+            raise NotARunError(f"{where}: not a training run's config (its config is no JSON object)")
+        return cls(Path(run_dir), record, tuple(history))
+
+    @property
+    def paths(self) -> RunPaths:
+        return RunPaths(self.run_dir)
+
+    @property
+    def config_path(self) -> Path:
+        return self.paths.config
+
+    @property
+    def model_path(self) -> Path:
+        return self.paths.model
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.paths.checkpoint
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The run's configuration as stored (``TrainConfig.from_dict`` reads it back)."""
+        return dict(self.record["config"])
+
+    @property
+    def resolved(self) -> dict[str, Any]:
+        """The schedule and sample counts the configuration resolved to."""
+        return dict(self.record.get("resolved") or {})
+
+    @property
+    def recipe(self) -> dict[str, dict[str, Any]] | None:
+        """The resolved recipe (None in a record written before records held it)."""
+        return self.record.get("recipe")
+
+    @property
+    def rows(self) -> dict[str, Any]:
+        return dict(self.record.get("rows") or {})
+
+    @property
+    def logs(self) -> list[dict[str, Any]]:
+        return list(self.record.get("logs") or [])
+
+    @property
+    def contract(self) -> dict[str, Any]:
+        return dict(self.record.get("contract") or {})
+
+    @property
+    def result(self) -> dict[str, Any] | None:
+        """What the export added (exported epoch, validation metrics ...); None until the run exported."""
+        return self.record.get("result")
+
+    @property
+    def finished(self) -> bool:
+        """Whether the run exported its model: the record holds its result and the model file is there."""
+        return self.result is not None and self.model_path.is_file()
+
+    @property
+    def last_epoch(self) -> EpochRow | None:
+        return self.history[-1] if self.history else None
+
+
+def write_config(run_dir: Path, record: Mapping[str, Any]) -> None:
+    """Write the run's configuration record (before training)."""
+    write_json(RunPaths(Path(run_dir)).config, dict(record))
+
+
+def write_result(run_dir: Path, result: Mapping[str, Any]) -> None:
+    """Add what the export found to the run's record."""
+    run = RunRecord.load(run_dir)
+    write_config(run.run_dir, {**run.record, "result": dict(result)})
+
+
+def write_history(run_dir: Path, rows: Iterable[EpochRow | Mapping[str, Any]]) -> None:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=HISTORY_FIELDS, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: r[k] for k in HISTORY_FIELDS})
-    write_text(path, buf.getvalue())
+        row = r.as_dict() if isinstance(r, EpochRow) else r
+        w.writerow({k: row[k] for k in HISTORY_FIELDS})
+    write_text(RunPaths(Path(run_dir)).history, buf.getvalue())
 
 
-def read_history(path: Path) -> list[dict[str, float]]:
+def read_history(path: Path) -> list[EpochRow]:
+    """The rows of a ``history.csv`` (read as CSV: quoted fields and columns beyond the four are fine);
+    :class:`~protocol.errors.BadValue` naming the file and line for a row that is not one."""
     with Path(path).open(newline="", encoding="utf-8") as fh:
-        return [{k: (int(v) if k == "epoch" else float(v)) for k, v in row.items()} for row in csv.DictReader(fh)]
+        reader = csv.DictReader(fh)
+        missing = [k for k in HISTORY_FIELDS if k not in (reader.fieldnames or ())]
+        if missing:
+            raise BadValue(f"{path}: not a training history (no column {', '.join(missing)})")
+        out = []
+        for row in reader:
+            try:
+                out.append(EpochRow(int(float(row["epoch"])), float(row["train_loss"]), float(row["val_loss"]),
+                                    float(row["seconds"])))
+            except (TypeError, ValueError) as exc:
+                raise BadValue(f"{path}: line {reader.line_num}: not an epoch's row ({exc})") from None
+        return out

@@ -18,6 +18,7 @@ from typing import Any
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
 from drive_server.smoothing import OFF, SERVING_KEY, serving_alpha
 from models.networks.architectures import ARCHITECTURES
+from models.networks.runfiles import RunPaths, RunRecord
 from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT
 
@@ -48,7 +49,7 @@ class ModelFile:
 class CardSource:
     """What a card is written from."""
 
-    record: dict[str, Any]  # the run's config.json
+    record: RunRecord  # what the run recorded
     model: ModelFile
     recipe: Path  # the resolved recipe beside the card, as the commands name it
     home: str  # rbc sim flags of the behavior's scene, e.g. "--track lake"
@@ -82,7 +83,7 @@ def card(src: CardSource) -> str:
 # --- the sections -------------------------------------------------------------------------------------------------
 
 def _title(src: CardSource) -> str:
-    c = src.record["config"]
+    c = src.record.config
     rig = _rig(src)
     filmed = f"filmed by the `{rig}` camera rig" if rig else "filmed by several camera rigs"
     network = NETWORKS.get(c["arch"], c["arch"])
@@ -93,10 +94,10 @@ def _title(src: CardSource) -> str:
 
 
 def _what_it_is(src: CardSource) -> str:
-    c = src.record["config"]
+    c = src.record.config
     params = src.model.info.get("parameters") or ARCHITECTURES[c["arch"]].params
     items = [("Network", f"{NETWORKS.get(c['arch'], c['arch'])}, {params:,} parameters."),
-             ("Input", _input(src.model.contract or src.record["contract"])), ("Camera", _camera(src)),
+             ("Input", _input(src.model.contract or src.record.contract)), ("Camera", _camera(src)),
              ("Training data", _training_data(src.record)), ("Validation", _validation(src.record)),
              ("Training", _training(src)), ("Its answer", _answer(src))]
     return "## What it is\n\n" + "\n".join(_wrap(f"- **{label}**: {text}", "  ") for label, text in items)
@@ -111,7 +112,7 @@ def _how_to_use(src: CardSource) -> str:
 
 
 def _how_well(src: CardSource) -> str:
-    c, path, stem = src.record["config"], _q(src.model.path), src.model.path.stem
+    c, path, stem = src.record.config, _q(src.model.path), src.model.path.stem
     val = [_shown(v) for v in c.get("val_data", [])]
     rec = _q(val[0]) if val else "DIR"
     commands = [f"rbc sim --model {path} {src.home} --json lap.json",
@@ -132,7 +133,7 @@ def _how_well(src: CardSource) -> str:
 
 
 def _limits(src: CardSource) -> str:
-    c = src.record["config"]
+    c = src.record.config
     items = ["It knows only the roads, light and camera of its training data; anywhere else, measure it first "
              "([How well it drives](#how-well-it-drives))."]
     if _split_kind(src.record) == "random":
@@ -148,7 +149,7 @@ def _limits(src: CardSource) -> str:
 
 
 def _reproduce(src: CardSource) -> str:
-    c = src.record["config"]
+    c = src.record.config
     head = (f"Its settings are its recipe, `{src.recipe.as_posix()}` beside this card: every key, resolved from the "
             "run's record. These commands rebuild it, deterministic per seed:")
     text = "" if src.data_commands else ("It needs the data folders it was trained and validated on: `rbc collect` "
@@ -182,8 +183,8 @@ def _camera(src: CardSource) -> str:
             "`rbc sim`, `rbc eval` and `rbc demo` film it with that rig.")
 
 
-def _training_data(record: dict[str, Any]) -> str:
-    c, r, rows = record["config"], record["resolved"], record.get("rows", {})
+def _training_data(record: RunRecord) -> str:
+    c, r, rows = record.config, record.resolved, record.rows
     text = _folders(record, c["data"])
     if rows.get("stride", 1) > 1:
         text += f"; 1 row in {rows['stride']} used"
@@ -194,8 +195,8 @@ def _training_data(record: dict[str, Any]) -> str:
         f" ({zero:,} of them steering 0, before balancing)." if zero is not None else ".")
 
 
-def _validation(record: dict[str, Any]) -> str:
-    c, r = record["config"], record["resolved"]
+def _validation(record: RunRecord) -> str:
+    c, r = record.config, record.resolved
     if c.get("val_data"):
         text = f"the recordings {_folders(record, c['val_data'])}: {r['val_samples']:,} samples, never trained on."
     else:
@@ -203,7 +204,7 @@ def _validation(record: dict[str, Any]) -> str:
         how = {"blocks": f"in stretches of {c.get('block_frames')} frames (their neighbours dropped from training)",
                "random": "at random (the paper's split)", "recordings": "as whole recordings"}.get(kind, kind)
         text = f"{r['val_samples']:,} samples of the same data, held out {how}."
-    result = record.get("result", {})
+    result = record.result or {}
     if c.get("export") == "best":
         return text + (f" They chose the exported epoch, the one with the lowest validation MSE (epoch "
                        f"{result.get('exported_epoch', '?')} of {r['epochs']}).")
@@ -211,7 +212,7 @@ def _validation(record: dict[str, Any]) -> str:
 
 
 def _training(src: CardSource) -> str:
-    c, r = src.record["config"], src.record["resolved"]
+    c, r = src.record.config, src.record.resolved
     link = _link(src, "glossary.md", "approach")
     if c["approach"] == "nvidia":
         text = f"NVIDIA's [approach]({link}) (centre camera only, crop, YUV, no zero-steer balancing)"
@@ -227,7 +228,7 @@ def _training(src: CardSource) -> str:
 
 
 def _answer(src: CardSource) -> str:
-    info, c, smooth = src.model.info, src.record["config"], src.model.smooth
+    info, c, smooth = src.model.info, src.record.config, src.model.smooth
     mirror, scale = bool(info.get("mirror_average")), float(info.get("output_scale", 1.0))
     if not mirror and scale == 1.0 and smooth == OFF:
         return "the network's steering, as trained."
@@ -250,7 +251,7 @@ def _train_command(src: CardSource, c: dict[str, Any]) -> str:
 
 def _file_command(src: CardSource, c: dict[str, Any]) -> list[str]:
     """How the run's model.onnx becomes the card's file: nothing, a copy, or ``rbc mirror``."""
-    made = Path(c["out"]) / "model.onnx"
+    made = RunPaths(Path(c["out"])).model
     if os.path.normpath(made) == os.path.normpath(src.model.path):
         return []
     words = ["cp", made.as_posix(), src.model.path.as_posix()]
@@ -270,15 +271,15 @@ def _rig(src: CardSource) -> str:
     return src.model.info.get("camera_rig", LEGACY_RIG)
 
 
-def _split_kind(record: dict[str, Any]) -> str:
-    split = record["resolved"].get("split")
-    return split["kind"] if isinstance(split, dict) else record["config"].get("split", "random")
+def _split_kind(record: RunRecord) -> str:
+    split = record.resolved.get("split")
+    return split["kind"] if isinstance(split, dict) else record.config.get("split", "random")
 
 
-def _folders(record: dict[str, Any], folders: list[str]) -> str:
+def _folders(record: RunRecord, folders: list[str]) -> str:
     """``folders`` with their rows, from the run's per-log report (one log per folder, training's then
     validation's, in order)."""
-    c, logs = record["config"], record.get("logs", [])
+    c, logs = record.config, record.logs
     names = [*c["data"], *c.get("val_data", [])]
     rows = {n: log["rows"] for n, log in zip(names, logs, strict=False)} if len(logs) == len(names) else {}
     return ", ".join(f"`{_shown(f)}`" + (f" ({rows[f]:,} rows)" if f in rows else "") for f in folders)

@@ -11,9 +11,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+
+from models.networks.runfiles import EpochRow
 
 LAP_FRAMES = 1200  # about one lap of the lake track at the simulator's recording rate
 
@@ -46,13 +49,13 @@ def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
     return path
 
 
-def plot_loss(out: Path, history: list[dict[str, float]], exported_epoch: int | None = None) -> Path:
+def plot_loss(out: Path, history: Sequence[EpochRow], exported_epoch: int | None = None) -> Path:
     import matplotlib.pyplot as plt
 
-    epochs = [h["epoch"] for h in history]
+    epochs = [h.epoch for h in history]
     fig, ax = plt.subplots(figsize=(5.5, 3.5))
-    ax.plot(epochs, [h["train_loss"] for h in history], "o-", label="training (augmented)")
-    ax.plot(epochs, [h["val_loss"] for h in history], "s-", label="validation")
+    ax.plot(epochs, [h.train_loss for h in history], "o-", label="training (augmented)")
+    ax.plot(epochs, [h.val_loss for h in history], "s-", label="validation")
     if exported_epoch:
         ax.axvline(exported_epoch, color="0.4", ls=":", label=f"exported (epoch {exported_epoch})")
     ax.set_yscale("log")
@@ -86,7 +89,7 @@ def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: 
         name = session.get_inputs()[0].name
         x = to_input_tensor(images, pipeline.contract)
         pred = np.concatenate([session.run(None, {name: x[i:i + 256]})[0] for i in range(0, len(x), 256)]).ravel()
-        source = "model.onnx (ONNX Runtime)"
+        source = f"{onnx_path.name} (ONNX Runtime)"
     else:
         from models.augmentation.fastaug import training_contract
 

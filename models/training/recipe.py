@@ -20,6 +20,7 @@ from drive_server.contract import DECODE_REDUCTIONS
 from drive_server.runrecords import write_text
 from models.data.behavior import Approach, Arch
 from models.data.split import SplitKind
+from models.networks.runfiles import MODEL, RunRecord
 from models.training.train_config import BRIGHTNESS_MODES, EXPORTS, REMOVED, RENAMED, TrainConfig
 from protocol.errors import BadValue
 from protocol.facts import BEHAVIORS
@@ -76,7 +77,7 @@ SECTIONS: dict[str, dict[str, str]] = {
         "batch_size": "samples per step",
         "learning_rate": "Adam's step size",
         "seed": "split, balancing, augmentation and initialisation: the same seed and data give the same weights",
-        "export": "which epoch becomes model.onnx: best (lowest validation MSE) or last",
+        "export": f"which epoch becomes {MODEL}: best (lowest validation MSE) or last",
         "max_steps_per_epoch": "cap on steps per epoch, for quick runs; 0: none",
     },
     "export": {
@@ -195,18 +196,17 @@ def sections_toml(sections: dict[str, dict[str, Any]], header: list[str]) -> str
     return "\n".join(lines) + "\n"
 
 
-def run_recipe(record: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """A run's recipe, resolved, from its ``config.json`` record (one written before records held it: from its
-    config)."""
-    if "recipe" in record:
-        return record["recipe"]
-    return recipe_sections(TrainConfig.from_dict(record["config"], "the run's config.json"))
+def run_recipe(run: RunRecord) -> dict[str, dict[str, Any]]:
+    """A run's recipe, resolved, from its record (one written before records held it: from its config)."""
+    if run.recipe is not None:
+        return run.recipe
+    return recipe_sections(TrainConfig.from_dict(run.config, str(run.config_path)))
 
 
-def save_run_recipe(record: dict[str, Any], path: Path, header: list[str]) -> bool:
+def save_run_recipe(run: RunRecord, path: Path, header: list[str]) -> bool:
     """Write the run's resolved recipe to ``path`` (True); a recipe already there that gives the same run is kept
     as it is, comments and all (False); one that gives another run is an error, never overwritten."""
-    sections = run_recipe(record)
+    sections = run_recipe(run)
     if path.exists():
         if recipe_sections(load_recipe(str(path))) != sections:
             raise BadValue(f"{path}: a recipe that gives another run than this one is already there",

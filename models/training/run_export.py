@@ -3,7 +3,6 @@ held-out frames, written to ``model.onnx`` and recorded in ``config.json``."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -86,13 +85,11 @@ def finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tra
             "mirror_average": config.mirror_average, "output_scale": config.output_scale,
             "serve_smooth": config.serve_smoothing, "recipe": recipe_sections(config)}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
-    path = run_dir / runfiles.MODEL
+    path = runfiles.RunPaths(run_dir).model
     diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.serve_smoothing)
-    record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
-    record["result"] = {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
-                        "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,
-                        "rows": data.counts, "onnx_max_diff": diff, "val_by_recording": by_recording}
-    runrecords.write_json(run_dir / runfiles.CONFIG, record)
+    runfiles.write_result(run_dir, {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
+                                    "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,
+                                    "rows": data.counts, "onnx_max_diff": diff, "val_by_recording": by_recording})
     return TrainResult(run_dir, state.history, path, val_loss, diff, samples_per_s=rate,
                        info={**info, "metrics": metrics, "summary": data.summary(config.data_options()),
                              "val_by_recording": by_recording})

@@ -8,7 +8,6 @@ and returns; ``resume=True`` continues from it with the stored configuration, ba
 from __future__ import annotations
 
 import copy
-import json
 import logging
 import math
 import os
@@ -24,7 +23,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from drive_server import runrecords
 from models.augmentation.fastaug import FastAugmenter
 from models.data.batches import Prefetcher, TrainingSet, epoch_batches
 from models.data.behavior import Pipeline
@@ -84,7 +82,7 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
     model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
     state, best = State(), None
-    checkpoint = run_dir / runfiles.CHECKPOINT
+    checkpoint = runfiles.RunPaths(run_dir).checkpoint
     if resume and checkpoint.exists():  # before decoding any frame: a bad checkpoint is reported at once
         state, best = load_checkpoint(checkpoint, model, optimizer)
         log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
@@ -95,7 +93,7 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
         steps = min(steps, config.max_steps_per_epoch)
     if world.is_main and not (resume and checkpoint.exists()):
         record = config_record(config, pipeline, data, epochs, steps, validation_steps(n_val, config.batch_size))
-        runrecords.write_json(run_dir / runfiles.CONFIG, record | {"world_size": world.size})
+        runfiles.write_config(run_dir, record | {"world_size": world.size})
 
     log.info("%s", data.summary(config.data_options()))
     augmenter = FastAugmenter(data.cache, pipeline.augment)
@@ -128,7 +126,7 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
                 state.best_epoch, state.best_val = state.epoch + 1, val_loss
             state = replace(state, epoch=state.epoch + 1, step=0, loss_sum=0.0, loss_count=0, epoch_seconds=0.0)
             if world.is_main:
-                runfiles.write_history(run_dir / runfiles.HISTORY, state.history)
+                runfiles.write_history(run_dir, state.history)
                 save_checkpoint(checkpoint, model, optimizer, state, config, best)
             if stop.requested and state.epoch < epochs:
                 log.warning("interrupted after epoch %d: checkpoint saved; continue with --resume", state.epoch)
@@ -204,14 +202,14 @@ def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
 
 
 def _resolve_config(config: TrainConfig, run_dir: Path, resume: bool, world: ddp.World = ddp.SINGLE) -> TrainConfig:
-    stored_path = run_dir / runfiles.CONFIG
+    paths = runfiles.RunPaths(run_dir)
     if resume:
-        if not stored_path.exists():
+        if not paths.config.exists():
             raise RunDirError(f"{run_dir}: nothing to resume (no {runfiles.CONFIG})")
-        stored = TrainConfig.from_dict(json.loads(stored_path.read_text(encoding="utf-8"))["config"], str(stored_path))
+        stored = TrainConfig.from_dict(runfiles.RunRecord.load(run_dir).config, str(paths.config))
         return replace(stored, out=str(run_dir), threads=config.threads, decode_workers=config.decode_workers,
                        progress=config.progress)
-    if world.is_main and ((run_dir / runfiles.CHECKPOINT).exists() or (run_dir / runfiles.MODEL).exists()):
+    if world.is_main and (paths.checkpoint.exists() or paths.model.exists()):
         raise RunDirError(f"{run_dir} already holds a run: pass --resume to continue it, or choose another --out")
     if not config.data:
         raise RunDirError("no --data given")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from models.networks.runfiles import MODEL
 from tools.arguments import add_loop_rule_arguments, add_smooth_argument, add_speed_unit_argument, smooth_alpha
 from tools.realdata.fetch import DEFAULT_BASE_URL
 from tools.realdata.recordings import TRACKS
@@ -86,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     help="where rbc data fetch put the recordings (default %(default)s)")
     models = cv.add_mutually_exclusive_group(required=True)
     models.add_argument("--models", metavar="PATTERN",
-                        help="the fold models, with {fold} for the fold's letter, e.g. runs/cv-{fold}/model.onnx")
+                        help=f"the fold models, with {{fold}} for the fold's letter, e.g. runs/cv-{{fold}}/{MODEL}")
     models.add_argument("--recipe", metavar="FILE_OR_NAME",
                         help="train the fold models with this rbc train recipe first (each fold once: a finished "
                              "fold is never trained again, an interrupted one continues from its checkpoint), "

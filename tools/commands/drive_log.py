@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from models.networks.runfiles import CONFIG
 from tools.arguments import add_loop_rule_arguments, add_smooth_argument, smooth_alpha
 from tools.errors import CommandError
 
@@ -50,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="drive only these rows of the log (1-based, inclusive), each stretch from the recorded "
                            "path; the road is still found on the whole recording")
     part.add_argument("--held-out-of", type=Path, metavar="RUN_DIR",
-                      help="drive only the rows that this training run held out for validation (its config.json)")
+                      help=f"drive only the rows that this training run held out for validation (its {CONFIG})")
     p.add_argument("--json", type=Path, help="write the result record here")
     p.add_argument("--strip", type=Path, default=Path("drive_log_out/strip.jpg"),
                    help="picture of synthesized views (take-overs framed in red)")

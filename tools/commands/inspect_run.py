@@ -5,12 +5,10 @@ Named ``inspect_run`` rather than after the subcommand so that it never shadows 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from models.networks import runfiles
+from models.networks.runfiles import RunRecord
 from models.training.inspection import LAP_FRAMES, plot_activations, plot_histograms, plot_loss, plot_predictions
-from tools.errors import CommandError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,30 +30,26 @@ def run(args: argparse.Namespace) -> int:
     from models.training.train import TrainConfig
 
     run_dir: Path = args.run_dir
-    if not (run_dir / runfiles.CONFIG).is_file():
-        raise CommandError(f"{run_dir}: not a training run folder (no {runfiles.CONFIG})",
-                           "give the --out folder of an rbc train run")
-    record = json.loads((run_dir / runfiles.CONFIG).read_text(encoding="utf-8"))
-    config = TrainConfig.from_dict(record["config"], str(run_dir / runfiles.CONFIG))
+    record = RunRecord.load(run_dir)
+    config = TrainConfig.from_dict(record.config, str(record.config_path))
     pipeline = config.pipeline()  # with the run's crop: the frames the model was trained on
     data = prepare_data(args.data or config.data, pipeline, config.seed, config.data_options())
     out = run_dir / "inspect"
     out.mkdir(parents=True, exist_ok=True)
     written = [plot_histograms(out, data, pipeline, config.seed)]
-    if (run_dir / runfiles.HISTORY).exists():
-        exported = record.get("result", {}).get("exported_epoch")
-        written.append(plot_loss(out, runfiles.read_history(run_dir / runfiles.HISTORY), exported))
+    if record.history:
+        exported = (record.result or {}).get("exported_epoch")
+        written.append(plot_loss(out, record.history, exported))
     model = build_model(config.arch, pipeline.contract.height, pipeline.contract.width)
-    checkpoint = run_dir / runfiles.CHECKPOINT
-    if checkpoint.exists():
-        model.load_state_dict(exported_weights(checkpoint, config.export))
+    if record.checkpoint_path.exists():
+        model.load_state_dict(exported_weights(record.checkpoint_path, config.export))
     model.eval()
-    path, window = plot_predictions(out, data, pipeline, model, run_dir / runfiles.MODEL, args.frames)
+    path, window = plot_predictions(out, data, pipeline, model, record.model_path, args.frames)
     written.append(path)
     written.append(plot_activations(out, data, pipeline, model, args.samples, config.seed))
     for p in written:
         print(p)
     print(f"plotted window, its validation frames only ({config.split} split): {format_metrics(window)}")
-    if "result" in record:
-        print(f"all validation frames, as rbc train reported them: {format_metrics(record['result']['val_metrics'])}")
+    if record.result is not None:
+        print(f"all validation frames, as rbc train reported them: {format_metrics(record.result['val_metrics'])}")
     return 0

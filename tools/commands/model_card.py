@@ -10,13 +10,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from models.networks.runfiles import MODEL
 from tools.errors import CommandError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="the rbc train run folder of the model")
     p.add_argument("--model", type=Path, metavar="M.onnx",
-                   help="the model file the card describes, e.g. an rbc mirror copy (default: RUN_DIR/model.onnx)")
+                   help=f"the model file the card describes, e.g. an rbc mirror copy (default: RUN_DIR/{MODEL})")
     p.add_argument("--out", type=Path, metavar="CARD.md",
                    help="card to write (default: beside the model, NAME.md); the recipe goes beside it, CARD.toml")
     p.add_argument("--purpose", help="the card's one-line purpose (default: one said from the run)")
@@ -26,17 +27,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    from drive_server.runrecords import read_json, write_text
-    from models.networks.runfiles import CONFIG, MODEL
+    from drive_server.runrecords import write_text
+    from models.networks.runfiles import RunRecord
     from models.onnxfiles.model_card import CardSource, card, read_model_file
     from models.training.recipe import bundled_recipes, save_run_recipe
 
-    model = a.model or a.run_dir / MODEL
+    record = RunRecord.load(a.run_dir)
+    model = a.model or record.model_path
     out = a.out or model.with_suffix(".md")
-    if not (a.run_dir / CONFIG).is_file():
-        raise CommandError(f"{a.run_dir}: no {CONFIG}", "give the folder rbc train --out wrote")
-    record = read_json(a.run_dir / CONFIG)
-    if "result" not in record:
+    if record.result is None:
         raise CommandError(f"{a.run_dir}: the run has exported no model yet", "finish it: rbc train --resume")
     if not model.is_file():
         raise CommandError(f"no model at {model}", "give --model, the file the card describes")
@@ -47,7 +46,7 @@ def run(a: argparse.Namespace) -> int:
                                                f"{a.run_dir.as_posix()}: every key, defaults included.",
                                                f"Its card, {out.name}, has the commands that rebuild it."])
     bundled = recipe.stem if bundled_recipes().get(recipe.stem) == recipe.resolve() else ""
-    source = CardSource(record, model_file, recipe, _home(record["config"]["behavior"]), a.purpose or "",
+    source = CardSource(record, model_file, recipe, _home(record.config["behavior"]), a.purpose or "",
                         tuple(a.data_command or ()), bundled)
     write_text(out, card(source))
     print(f"wrote {out}; recipe {recipe} {'written' if written else 'kept (it gives the same run)'}")

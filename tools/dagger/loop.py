@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.runrecords import code_version, file_sha256, read_json, write_json, write_text
+from models.networks.runfiles import EpochRow, RunPaths, RunRecord
 from protocol.codeversion import ROOT, code_digest
 from protocol.errors import BadValue
 from tools.dagger.config import DaggerConfig
@@ -177,7 +178,12 @@ def run_round(config: DaggerConfig, out: Path, r: int, worlds: list[tuple[int, s
 
 
 def model_path(out: Path, round_: int) -> Path:
-    return round_dir(out, round_) / "train" / "model.onnx"
+    return RunPaths(train_dir(out, round_)).model
+
+
+def train_dir(out: Path, round_: int) -> Path:
+    """Round ``round_``'s training run (an ``rbc train`` run folder)."""
+    return round_dir(out, round_) / "train"
 
 
 def train_round(config: DaggerConfig, out: Path, r: int, threads: int | None = None,
@@ -187,10 +193,10 @@ def train_round(config: DaggerConfig, out: Path, r: int, threads: int | None = N
     from models.training.recipe import load_recipe
     from models.training.train import TrainConfig, train
 
-    run_dir = round_dir(out, r) / "train"
-    model = run_dir / "model.onnx"
-    if not model.is_file():
-        if (run_dir / "checkpoint.pt").is_file():
+    run_dir = train_dir(out, r)
+    paths = RunPaths(run_dir)
+    if not paths.model.is_file():
+        if paths.checkpoint.is_file():
             result = train(TrainConfig(data=[], out=str(run_dir), threads=threads, progress=progress), resume=True)
         else:
             shutil.rmtree(run_dir, ignore_errors=True)  # begun but nothing saved: start again, the same
@@ -202,15 +208,14 @@ def train_round(config: DaggerConfig, out: Path, r: int, threads: int | None = N
             result = train(train_config)
         if result.interrupted:
             raise Stopped(f"training of round {r} interrupted; its checkpoint is in {run_dir}")
-    run = read_json(run_dir / "config.json")
-    history = (run_dir / "history.csv").read_text(encoding="utf-8").strip().splitlines()
-    last = dict(zip(history[0].split(","), history[-1].split(","), strict=False))
-    stored = dict(run.get("config") or {})  # paths relative to OUT: a record says the same wherever the run lies
+    run = RunRecord.load(run_dir)
+    last = run.last_epoch or EpochRow(0, float("nan"), float("nan"), 0.0)
+    stored = run.config  # paths relative to OUT: a record says the same wherever the run lies
     stored["data"] = [_relative(d, out) for d in stored.get("data", [])]
     stored["out"] = _relative(stored.get("out", str(run_dir)), out)
-    return {"recipe": config.recipe, "config": stored, "resolved": run.get("resolved"),
-            "val_loss": float(last.get("val_loss", "nan")), "train_loss": float(last.get("train_loss", "nan")),
-            "epochs": len(history) - 1}
+    return {"recipe": config.recipe, "config": stored, "resolved": run.resolved,
+            "val_loss": last.val_loss, "train_loss": last.train_loss,
+            "epochs": len(run.history)}
 
 
 def _relative(path: str, out: Path) -> str:

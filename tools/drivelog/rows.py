@@ -7,7 +7,6 @@ rows is driven as a session of its own: the car starts on the recorded path at i
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -47,17 +46,11 @@ def held_out_mask(samples: Sequence[Sample], run_dir: Path) -> np.ndarray:
     says which logs it read and how it split them; the split is drawn again, no frame decoded). A run that read
     every Nth row held out stretches of them: the rows between two held-out neighbours are held out too."""
     from models.data.trainingdata import split_logs
+    from models.networks.runfiles import RunRecord
     from models.training.train_config import TrainConfig
 
-    path = Path(run_dir) / "config.json"
-    try:
-        stored = json.loads(path.read_text(encoding="utf-8"))["config"]
-        if not isinstance(stored, dict):
-            raise TypeError(f"its config is a JSON {type(stored).__name__}")
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise BadValue(f"{path}: not a training run's config ({exc})",
-                       "give the folder rbc train wrote (it holds config.json)") from None
-    config = TrainConfig.from_dict(stored, str(path))
+    record = RunRecord.load(run_dir)
+    config = TrainConfig.from_dict(record.config, str(record.config_path))
     dataset, _, val = split_logs(config.data, config.seed, config.data_options())
     spans: dict[Path, list[tuple[int, int]]] = {}
     for run in np.split(val, np.flatnonzero(np.diff(val) != 1) + 1):

@@ -13,8 +13,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import file_sha256, read_json
-from models.networks.runfiles import CONFIG, HISTORY, read_history
+from drive_server.runrecords import file_sha256
+from models.networks.runfiles import HISTORY, RunPaths, RunRecord, read_history
 from tools.errors import CommandError
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
 from tools.evaluate.paper import PAPER_TABLE10, PAPER_TABLE10_RANGES
@@ -55,18 +55,19 @@ def training_summary(run_dir: Path | None) -> dict[str, Any]:
     if run_dir is None:
         return {}
     out: dict[str, Any] = {}
-    if (run_dir / CONFIG).is_file():
-        stored = read_json(run_dir / CONFIG)
-        cfg, resolved = stored.get("config", {}), stored.get("resolved", {})
+    paths = RunPaths(run_dir)
+    if paths.config.is_file():
+        run = RunRecord.load(run_dir)
+        cfg, resolved = run.config, run.resolved
         out.update(arch=cfg.get("arch"), approach=cfg.get("approach"), epochs=resolved.get("epochs"),
                    steps_per_epoch=resolved.get("steps_per_epoch"), batch_size=cfg.get("batch_size"),
                    aug_loops=cfg.get("aug_loops"))
-    if not (run_dir / HISTORY).is_file():
+    if not paths.history.is_file():
         log.warning("no %s in %s: training time unknown", HISTORY, run_dir)
         return out
-    rows = read_history(run_dir / HISTORY)
+    rows = read_history(paths.history)
     if rows:
-        out.update(seconds=sum(r["seconds"] for r in rows), val_mse=rows[-1]["val_loss"])
+        out.update(seconds=sum(r.seconds for r in rows), val_mse=rows[-1].val_loss)
     return out
 
 

@@ -20,8 +20,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drive_server.runrecords import write_json
-from models.networks.runfiles import CONFIG, MODEL
+from models.networks.runfiles import RunPaths, RunRecord
 from protocol.codeversion import ROOT, code_digest, data_digest
+from protocol.errors import UserError
 from tools.realdata.recordings import PublicRecording
 
 if TYPE_CHECKING:
@@ -42,14 +43,14 @@ EXECUTION_ONLY = ("out", "threads", "decode_workers", "progress")
 
 def fold_models(runs: Path) -> str:
     """The ``--models`` pattern of the fold runs under ``runs``."""
-    return str(runs / RUN_NAME / MODEL)
+    return str(RunPaths(runs / RUN_NAME).model)
 
 
 def is_finished(run_dir: Path) -> bool:
     """The run exported its model and recorded the result (written last, after the model)."""
     try:
-        return (run_dir / MODEL).is_file() and "result" in json.loads((run_dir / CONFIG).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return RunRecord.load(run_dir).finished
+    except (OSError, UserError):
         return False
 
 
@@ -91,8 +92,8 @@ def train_fold(recipe: str, fold: str, recordings: Sequence[PublicRecording], ro
         log.warning("%s was trained under other %s: trained afresh (the old run is in %s)", run_dir,
                     ", ".join(what), stale)
     if is_finished(run_dir):
-        return run_dir / MODEL
-    resume = (run_dir / CONFIG).is_file()
+        return RunPaths(run_dir).model
+    resume = RunPaths(run_dir).config.is_file()
     write_json(run_dir / KEY_FILE, key)
     result = train(config, resume=resume)
     return None if result.interrupted else result.onnx
