@@ -23,14 +23,18 @@ from drive_server.contract import PreprocessContract
 log = logging.getLogger(__name__)
 
 SCORE_NAME = "autoencoder"
+#: The side an input whose sides are not multiples of 8 is resized to first (the shallow CNN's own 64x64).
+RESIZED = 64
 
 
 class ConvAutoencoder(nn.Module):
     """Three stride-2 convolutions down to an 8-channel code at 1/8 of the size, and back (about 30k weights)."""
 
-    def __init__(self, channels_last: bool, width: int = 24, code: int = 8) -> None:
+    def __init__(self, channels_last: bool, width: int = 24, code: int = 8,
+                 resize: tuple[int, int] | None = None) -> None:
         super().__init__()
         self.channels_last = channels_last
+        self.resize = resize  # an input whose sides are not multiples of 8 (PilotNet's 66x200) is resized first
         self.encode = nn.Sequential(
             nn.Conv2d(3, width, 3, 2, 1), nn.ReLU(),
             nn.Conv2d(width, width, 3, 2, 1), nn.ReLU(),
@@ -41,16 +45,18 @@ class ConvAutoencoder(nn.Module):
             nn.ConvTranspose2d(width, width, 4, 2, 1), nn.ReLU(),
             nn.ConvTranspose2d(width, 3, 4, 2, 1))
 
-    def reconstruct(self, x: torch.Tensor) -> torch.Tensor:
-        """``x`` in the steering model's layout, reconstructed in NCHW."""
+    def target(self, x: torch.Tensor) -> torch.Tensor:
+        """``x`` (the steering model's layout) as the autoencoder sees it: NCHW, resized if it must be."""
         if self.channels_last:
             x = x.permute(0, 3, 1, 2)
-        return self.decode(self.encode(x))
+        if self.resize is not None:
+            x = nn.functional.interpolate(x, size=self.resize, mode="bilinear", align_corners=False)
+        return x
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """The per-frame score: mean squared reconstruction error (shape N)."""
-        target = x.permute(0, 3, 1, 2) if self.channels_last else x
-        return ((self.reconstruct(x) - target) ** 2).mean(dim=(1, 2, 3))
+        target = self.target(x)
+        return ((self.decode(self.encode(target)) - target) ** 2).mean(dim=(1, 2, 3))
 
 
 def train_autoencoder(frames: np.ndarray, contract: PreprocessContract, epochs: int = 6, batch_size: int = 128,
@@ -60,9 +66,8 @@ def train_autoencoder(frames: np.ndarray, contract: PreprocessContract, epochs: 
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     h, w = contract.height, contract.width
-    if h % 8 or w % 8:
-        raise ValueError(f"the autoencoder needs an input size divisible by 8, the contract's is {w}x{h}")
-    model = ConvAutoencoder(channels_last=contract.layout.lower() == "nhwc")
+    resize = None if h % 8 == 0 and w % 8 == 0 else (RESIZED, RESIZED)
+    model = ConvAutoencoder(channels_last=contract.layout.lower() == "nhwc", resize=resize)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs * max(1, len(frames) // batch_size))
     data = torch.from_numpy(np.ascontiguousarray(frames, dtype=np.float32))
