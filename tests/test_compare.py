@@ -5,6 +5,7 @@ from pathlib import Path
 import pytest
 
 from tools.evaluate.compare import TABLE10_EXPERIMENTS, build_table, training_time_s
+from tools.evaluate.evalrecord import EvalRecord
 
 
 def test_training_time_sums_the_epochs(tmp_path):
@@ -77,17 +78,18 @@ def test_compare_finds_an_evaluated_model_from_another_folder_and_refuses_a_move
     model = tmp_path / "models" / "m.onnx"
     model.parent.mkdir()
     model.write_bytes(b"weights")
-    results = {"meta": {"model": "models/m.onnx", "model_resolved": str(model), "model_sha256": file_sha256(model)}}
+    results = EvalRecord.from_dict({"meta": {"model": "models/m.onnx", "model_resolved": str(model),
+                                             "model_sha256": file_sha256(model)}}, tmp_path)
     monkeypatch.chdir(tmp_path)
-    assert evaluated_model(results, tmp_path) == Path("models/m.onnx")  # as given, from the eval's folder
+    assert evaluated_model(results) == Path("models/m.onnx")  # as given, from the eval's folder
     monkeypatch.chdir(model.parent)
-    assert evaluated_model(results, tmp_path) == model  # from elsewhere: the recorded absolute path
+    assert evaluated_model(results) == model  # from elsewhere: the recorded absolute path
     model.write_bytes(b"other weights")
     with pytest.raises(CommandError, match="has changed"):
-        evaluated_model(results, tmp_path)
+        evaluated_model(results)
     model.unlink()
     with pytest.raises(CommandError, match="not found"):
-        evaluated_model(results, tmp_path)
-    old = {"meta": {"model": "gone.onnx", "model_sha256": "x"}}  # results.json of an earlier version
+        evaluated_model(results)
+    old = EvalRecord.from_dict({"meta": {"model": "gone.onnx", "model_sha256": "x"}})  # of an earlier version
     with pytest.raises(CommandError, match="gone.onnx is not found"):
-        evaluated_model(old, tmp_path)
+        evaluated_model(old)

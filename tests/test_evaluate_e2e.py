@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 from tests.conftest import write_stadium
+from tools.evaluate.evalrecord import EvalRecord
 from tools.wire.server_process import ServerProcess
 
 
@@ -37,6 +38,10 @@ def test_eval_over_the_socket_writes_results_and_table(tmp_path, shallow_onnx):
     table = (out / "table9.md").read_text()
     assert "| No variation |" in table and "Vehicle orientation variation" in table
     assert "Robustness of shallow.onnx" in proc.stdout
+    record = EvalRecord.load(out)  # what rbc compare reads: the same record, typed
+    assert (record.meta, record.summary, list(record.runs)) == (meta, summary, runs)
+    assert (record.model, record.model_sha256) == (shallow_onnx, meta["model_sha256"])
+    assert record.behavior == meta["behavior"]
 
 
 WORLDS_CONFIG = '{"min_length_m": 200, "max_length_m": 400, "drive_check": false}'  # 0.2-0.4 km loops

@@ -464,27 +464,34 @@ def test_a_typo_in_a_flag_shows_the_subcommands_usage(capsys):
     assert err.startswith("usage: rbc sim") and "--tarck" in err
 
 
-#: A training run's file names: :mod:`models.networks.runfiles` names them, every other module asks it.
-RUN_FILE_NAME = re.compile(r"(?<![\w.-])(config\.json|history\.csv|checkpoint\.pt|model\.onnx)\b")
+#: The file names of records read in several rooms, and the one module that names each: a training run's files
+#: (models.networks.runfiles) and an evaluation's record (tools.evaluate.evalrecord); every other module asks it.
+RECORD_FILE_NAMES = {
+    "models.networks.runfiles": re.compile(r"(?<![\w.-])(config\.json|history\.csv|checkpoint\.pt|model\.onnx)\b"),
+    "tools.evaluate.evalrecord": re.compile(r"(?<![\w.-])results\.json\b"),
+}
+RUN_FILE_NAME = RECORD_FILE_NAMES["models.networks.runfiles"]
 
 
-def _run_file_names(path: Path) -> list[str]:
-    """``line: text`` of every string of the file's code that names a run's file. Docstrings and comments are the
-    file's documentation and may name them; a help string or a message asks runfiles for the name."""
+def _run_file_names(path: Path, pattern: re.Pattern[str] = RUN_FILE_NAME) -> list[str]:
+    """``line: text`` of every string of the file's code that names a record's file. Docstrings and comments are the
+    file's documentation and may name them; a help string or a message asks the record's module for the name."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     docstrings = {id(node.body[0].value) for node in ast.walk(tree)
                   if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
                   and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
     return [f"{node.lineno}: {node.value!r}" for node in ast.walk(tree)
             if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
-            and RUN_FILE_NAME.search(node.value)]
+            and pattern.search(node.value)]
 
 
-def test_only_runfiles_spells_a_training_runs_file_names():
+@pytest.mark.parametrize("home", sorted(RECORD_FILE_NAMES))
+def test_only_the_records_module_spells_its_file_names(home):
     """Issue 51: DAgger, drive-log and the model card wrote ``config.json``, ``history.csv``, ``checkpoint.pt`` and
-    ``model.onnx`` again (DAgger parsed history.csv with split(",")); now they read a RunRecord."""
-    where = {name: hits for name, path in MODULES.items() if name != "models.networks.runfiles"
-             for hits in [_run_file_names(path)] if hits}
+    ``model.onnx`` again (DAgger parsed history.csv with split(",")), rbc compare ``results.json``; now they read a
+    RunRecord and an EvalRecord."""
+    where = {name: hits for name, path in MODULES.items() if name != home
+             for hits in [_run_file_names(path, RECORD_FILE_NAMES[home])] if hits}
     assert where == {}
 
 

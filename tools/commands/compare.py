@@ -7,9 +7,10 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import read_json, write_text
+from drive_server.runrecords import write_text
 from tools.errors import CommandError
 from tools.evaluate.compare import build_table, evaluated_model, measure_latency, training_summary
+from tools.evaluate.evalrecord import EvalRecord
 
 log = logging.getLogger("rbc.compare")
 
@@ -34,8 +35,8 @@ def _table9(args: argparse.Namespace) -> int:
 
     summaries = {}
     for eval_dir in args.evals:
-        results = read_json(eval_dir / "results.json")
-        summaries[results["meta"]["behavior"]] = results["summary"]
+        results = EvalRecord.load(eval_dir)
+        summaries[results.behavior] = dict(results.summary)
     table = table9(summaries, with_paper=not args.no_paper)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_text(args.out, table)
@@ -45,9 +46,8 @@ def _table9(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    missing = [d for d in args.evals if not (d / "results.json").is_file()]
-    if missing:
-        raise CommandError(f"{missing[0]} has no results.json", f"run rbc eval --out {missing[0]} first")
+    for eval_dir in args.evals:  # every folder checked before any latency is measured
+        EvalRecord.load(eval_dir)
     if args.layout == "table9":
         return _table9(args)
     labels = args.labels or [d.name for d in args.evals]
@@ -56,12 +56,12 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("give as many --label and --train-run as --eval (or none)")
     columns = []
     for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
-        results = read_json(eval_dir / "results.json")
-        model = evaluated_model(results, eval_dir)
+        results = EvalRecord.load(eval_dir)
+        model = evaluated_model(results)
         log.info("measuring the deployment latency of %s", model)
         training = training_summary(run_dir)
         columns.append({"label": label, "eval_dir": str(eval_dir), "model": str(model),
-                        "model_sha256": results["meta"]["model_sha256"], "summary": results["summary"],
+                        "model_sha256": results.model_sha256, "summary": dict(results.summary),
                         "training_time_s": training.get("seconds"), "training": training,
                         "latency": measure_latency(model, args.frames)})
     table = build_table(columns, with_paper=not args.no_paper)

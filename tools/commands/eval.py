@@ -10,11 +10,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from drive_server.model import SteeringModel
-from drive_server.runrecords import code_version, file_sha256, write_json, write_text
+from drive_server.runrecords import code_version, file_sha256, write_text
 from tools.arguments import add_camera_argument, add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError
 from tools.evaluate.cluster import BACKENDS, make_runner
+from tools.evaluate.evalrecord import RESULTS, EvalRecord
 from tools.evaluate.experiments import (
     AUTONOMY_RULE,
     BEHAVIORS,
@@ -68,7 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="km/h for every experiment but the speed one (default %(default)s)")
     add_vehicle_argument(p, d.vehicle)
     add_camera_argument(p, None)
-    p.add_argument("--out", type=Path, required=True, help="output folder (results.json, table9.md, plots)")
+    p.add_argument("--out", type=Path, required=True, help=f"output folder ({RESULTS}, table9.md, plots)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "
                         "of the same model (runs.jsonl); only the missing runs are driven")
@@ -161,20 +162,20 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - started
     meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records),
                 resumed_runs=runner.reused, retried=runner.retried)
-    write_json(out / "results.json", {"meta": meta, "summary": summary, "runs": runner.records})
+    written = EvalRecord(out, meta, summary, runner.records).write()
     if interrupted:
-        print(f"interrupted after {wall:.0f} s; {len(runner.records)} finished runs in {out / 'results.json'} "
+        print(f"interrupted after {wall:.0f} s; {len(runner.records)} finished runs in {written} "
               f"(continue with the same command plus --resume)")
         return 130
     write_text(out / "table9.md", table9({args.behavior: summary}))
     plots = plot_experiments(summary, runner.records, out)
     resumed = f" ({runner.reused} reused from the journal)" if runner.reused else ""
-    retried = f", {len(runner.retried)} failed attempts retried (results.json meta.retried)" if runner.retried else ""
+    retried = f", {len(runner.retried)} failed attempts retried ({RESULTS} meta.retried)" if runner.retried else ""
     print(f"\nRobustness of {model.name} ({args.behavior}), {len(runner.records)} runs{resumed}, "
           f"{runner.workers} workers ({args.backend}){retried}, wall {wall:.0f} s")
     width = max(len(e.title) for e in EXPERIMENTS)
     for exp in EXPERIMENTS:
         if exp.key in summary:
             print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
-    print(f"\nwrote {out / 'results.json'}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
+    print(f"\nwrote {written}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
     return 0

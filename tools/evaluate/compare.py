@@ -16,6 +16,7 @@ from typing import Any
 from drive_server.runrecords import file_sha256
 from models.networks.runfiles import HISTORY, RunPaths, RunRecord, read_history
 from tools.errors import CommandError
+from tools.evaluate.evalrecord import EvalRecord
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment
 from tools.evaluate.paper import PAPER_TABLE10, PAPER_TABLE10_RANGES
 from tools.evaluate.report import format_cell, format_range, shown_experiments
@@ -26,16 +27,15 @@ log = logging.getLogger("rbc.compare")
 TABLE10_EXPERIMENTS = tuple(e for e in EXPERIMENTS if e.paper and e.key != "obstacles")
 
 
-def evaluated_model(results: dict[str, Any], eval_dir: Path) -> Path:
+def evaluated_model(results: EvalRecord) -> Path:
     """The model file an evaluation drove: the path as given to rbc eval, else its absolute form (so a
     compare run from another folder finds it); one line when it has moved or changed since."""
-    meta = results["meta"]
-    given = Path(meta["model"])
-    found = next((p for p in (given, Path(meta.get("model_resolved", given))) if p.is_file()), None)
+    given, eval_dir = results.model, results.eval_dir
+    found = next((p for p in (given, results.model_resolved) if p.is_file()), None)
     if found is None:
         raise CommandError(f"{eval_dir}: its model {given} is not found (moved, or a path relative to another "
                            "folder)", "run rbc compare from the folder rbc eval ran in, or evaluate it again")
-    if file_sha256(found) != meta["model_sha256"]:
+    if file_sha256(found) != results.model_sha256:
         raise CommandError(f"{eval_dir}: {found} has changed since it was evaluated (sha256 differs)",
                            "evaluate the model again")
     return found
