@@ -165,3 +165,24 @@ def test_a_world_run_loads_the_generated_world(monkeypatch, tmp_path):
     with pytest.raises(RuntimeError, match="stop here"):
         runner.drive(RunSpec("w", "nominal", "none", 0.0, "world:300"), model, "warn")
     assert seen and seen[0].endswith(".json") and "world-300" in seen[0]
+
+
+def test_the_threshold_sweep_replays_each_monitor_at_lower_thresholds():
+    """A monitor whose calibrated threshold is never reached warns at its calibration's p99 instead: the sweep
+    replays the stored one-second means (the driving monitor) and raw scores (a shadow) through the state machine."""
+    from drive_server.monitor import MonitorSpec
+    from tools.monitoreval.report import sweep
+    from tools.monitoreval.runset import RunSpec
+
+    t = list(np.arange(0, 60, 1 / HZ))
+    high = [0.5 if 26 <= x < 30 else 0.1 for x in t]  # rises 4 s before the take-over at 30 s
+    run = {"t": t, "level": "0" * len(t), "mean": high, "takeovers": [[30.0, "off_road"]], "sim_time_s": 60.0,
+           "shadows": {"s.onnx": high}}
+    spec = RunSpec("p", "perturbed", "light", 0.2, "lake")
+    cal = {"nominal_p99": 0.3, "nominal_max": 0.9}
+    rows = sweep([(spec, "warn", run)], RULES, {None: ("ae", MonitorSpec("ae", 1.0, 1.0, 15, cal)),
+                                                "s.onnx": ("shift", MonitorSpec("shift", 1.0, 1.0, 15, cal))})
+    by = {(r["monitor"], r["threshold"].split(" (")[1]): r for r in rows}
+    assert by[("ae", "calibrated)")]["r123"] == "0.0 % / 0.0 % / 0.0 %"
+    assert by[("ae", "calibration p99)")]["r123"] == "100.0 % / 100.0 % / 100.0 %"
+    assert by[("shift", "calibration p99)")]["lead1"] == "100.0 %"  # its window mean crosses 0.3 within 2 s

@@ -43,7 +43,7 @@ class EvalPlan:
 def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
     from drive_server.model import SteeringModel
     from tools.monitoreval.cost import monitor_cost
-    from tools.monitoreval.report import closed_loop, compare, figures, table_rows, tables
+    from tools.monitoreval.report import closed_loop, compare, figures, sweep, table_rows, tables
     from tools.monitoreval.runner import drive_all, file_digest
 
     found = SteeringModel(plan.model).monitor()
@@ -67,6 +67,8 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
         "figures": figures(results, plan.rules),
         "closed_loop": closed_loop(results) if plan.act else {},
         "monitors": compare(results, plan.rules, shadow_specs, f"{spec.score} ({plan.model.name}, drives)"),
+        "sweep": sweep(results, plan.rules, {None: (f"{spec.score} (drives)", spec),
+                                             **{n: (n, m) for n, m in shadow_specs.items()}}),
         "shadow_specs": {n: {"score": m.score, "warn": m.warn, "alarm": m.alarm, "window": m.window,
                              "calibration": m.calibration} for n, m in shadow_specs.items()},
         "cost": monitor_cost(plan.model, plan.cost_log) if plan.cost_log is not None else None,

@@ -100,6 +100,43 @@ def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
     return out
 
 
+def _at_threshold(spec: RunSpec, run: dict[str, Any], name: str | None, warn: float, window: int) -> RunTrace:
+    """A run's trace had the monitor warned from ``warn`` on (the server's state machine; alarms not counted):
+    the driving monitor's stored one-second means, or a shadow's stored scores through the window."""
+    from drive_server.monitor import MonitorSpec, MonitorState
+
+    if name is None:
+        values, spec_window = [m if m is not None else 0.0 for m in run["mean"]], 1  # already one-second means
+    else:
+        values, spec_window = run["shadows"][name], window
+    state = MonitorState(MonitorSpec("sweep", warn, max(warn, 1e30), spec_window))
+    levels = np.array([int(state.update(v).level) for v in values], dtype=np.uint8)
+    base = trace(spec, run)
+    return RunTrace(base.name, base.group, base.t, levels, base.takeovers, base.sim_time_s, base.meta)
+
+
+def sweep(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules,
+          monitors: dict[str | None, tuple[str, Any]]) -> list[dict[str, Any]]:
+    """Each monitor at lower warning thresholds than its calibrated one, on the same drives: what a looser
+    false-alarm target would buy. ``monitors``: shadow name (None: the driving one) -> (label, its MonitorSpec).
+    The thresholds are the calibration's own 99th percentile, halfway to its maximum, and the calibrated one."""
+    warn = [(s, r) for s, m, r in results if m == "warn"]
+    out = []
+    for name, (label, spec) in monitors.items():
+        cal = spec.calibration
+        p99, top = cal.get("nominal_p99"), cal.get("nominal_max")
+        if p99 is None or top is None:
+            continue
+        for which, threshold in (("calibration p99", p99), ("halfway to its max", (p99 + top) / 2),
+                                 ("calibrated", spec.warn)):
+            f = score([_at_threshold(s, r, name, threshold, spec.window) for s, r in warn], rules)
+            out.append({"monitor": label, "threshold": f"{threshold:.4g} ({which})",
+                        "r123": " / ".join(_pct(f.recall_at[k]) for k in ("1", "2", "3")),
+                        "lead1": _pct(f.lead_recall_at["1"]), "f3": f"{f.f3_1_3:.2f}",
+                        "false": f"{f.false_per_hour:.2f} ({f.false_per_hour_upper95:.2f})"})
+    return out
+
+
 def figures(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules) -> dict[str, Any]:
     """The monitor's figures on the ``warn`` runs (which drive exactly as without a monitor)."""
     traces = [trace(s, r) for s, m, r in results if m == "warn"]
@@ -214,6 +251,7 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
         costs = [{"monitor": name, "p50": f"{cost[key]['p50_ms']:.3f} ms", "p99": f"{cost[key]['p99_ms']:.3f} ms"}
                  for name, key in (("off", "off"), ("on (act)", "on"), ("added", "added"))]
     return {"anchors": anchors, "deployment": deployment, "closed_loop": closed, "cost": costs,
+            "sweep": record.get("sweep", []),
             "monitors": [{k: v for k, v in row.items() if k != "figures"} for row in record.get("monitors", [])]}
 
 
@@ -230,6 +268,10 @@ RESULT_TABLES = {
                    "columns": [["figure", "{figure}"], ["value", "{value}"]]},
     "closed-loop": {"rows": "runs.0.output.rows.closed_loop", "caption": "short",
                     "columns": [["figure", "{figure}"], ["--monitor warn", "{warn}"], ["--monitor act", "{act}"]]},
+    "sweep": {"rows": "runs.0.output.rows.sweep", "caption": "short",
+              "columns": [["monitor", "{monitor}"], ["warning threshold", "{threshold}"],
+                          ["recall 1 / 2 / 3 s", "{r123}"], ["lead >= 1 s", "{lead1}"], ["F3", "{f3}"],
+                          ["false per hour (95 % bound)", "{false}"]]},
     "cost": {"rows": "runs.0.output.rows.cost", "caption": "short",
              "columns": [["monitor", "{monitor}"], ["p50", "{p50}"], ["p99", "{p99}"]]},
 }
