@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "default %(default)s)")
     p.add_argument("--tau", type=float, default=law.tau,
                    help="gain of the throttle/brake law, 0..1 (tau of Eq. 14; default %(default)s)")
-    p.add_argument("--smooth", type=float, default=drive.smooth, metavar="ALPHA",
+    p.add_argument("--smooth", dest="smoothing", type=float, default=drive.smoothing, metavar="ALPHA",
                    help="smooth each client's steering over time: every frame sends ALPHA of the model's new output "
                         "and 1 - ALPHA of that client's last command, 0 < ALPHA <= 1, 1: off (default: what the "
                         "model's metadata asks for, 0.5 for the bundled unity.onnx; off for a model without)")
@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         drive = DriveConfig(law=ControlLaw(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
                                            tau=args.tau),
-                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smooth=args.smooth,
+                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smoothing=args.smoothing,
                             monitor=MonitorPolicy(mode=MonitorMode(args.monitor), slow_factor=args.monitor_slow))
         inference = InferenceConfig(threads=args.threads, provider=args.provider)
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                           fallback=fallback, transport=tuning, ping_interval_s=args.ping_interval, limits=limits,
                           dashboard=_dashboard_wanted(args, sock))
     log.info("model %s", model.describe())
-    smooth, whose = (model.smooth, "the model's") if drive.smooth is None else (drive.smooth, "--smooth")
+    smooth, whose = (model.smoothing, "the model's") if drive.smoothing is None else (drive.smoothing, "--smooth")
     log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s%s",
              drive.law.speed_limit_kmh, drive.law.steer_limit_deg, drive.law.tau, drive.speed_unit.value,
              f", steering smoothed per client (alpha {smooth:g}, {whose})" if smooth < 1 else "")

@@ -19,7 +19,7 @@ def server_view(server: Any) -> dict[str, Any]:
         "model": pipeline.model.path.name, "contract": pipeline.contract.__dict__,
         "control": {"speed_limit_kmh": cfg.law.speed_limit_kmh, "steer_limit_deg": cfg.law.steer_limit_deg,
                     "tau": cfg.law.tau,
-                    "speed_unit": cfg.speed_unit.value, "smooth": pipeline.smooth},
+                    "speed_unit": cfg.speed_unit.value, "smoothing": pipeline.smoothing},
         "monitor": _monitor_view(pipeline),
         "clients": len(server.clients), "viewers": server.dashboard.viewers if server.dashboard else 0,
     }

@@ -90,7 +90,7 @@ class SteeringModel:
         self.input_shape = tuple(inp.shape)
         self.contract, self.contract_source = self._contract()
         try:  # the steering smoothing the model was measured with (drive_server.smoothing; 1: none)
-            self.smooth = serving_alpha(self._session.get_modelmeta().custom_metadata_map.get(SERVING_KEY))
+            self.smoothing = serving_alpha(self._session.get_modelmeta().custom_metadata_map.get(SERVING_KEY))
         except ValueError as exc:
             raise ModelError(f"{path.name}: {exc}") from None
         self._outputs = [self.output_name]
@@ -160,4 +160,4 @@ class SteeringModel:
                 f"crop {self.contract.crop_top}..{self.contract.crop_bottom}"
                 + (f" decode 1/{self.contract.decode_reduce}" if self.contract.decode_reduce else "")
                 + (f" edges {self.contract.blank_columns} blanked" if self.contract.blank_columns else "")
-                + (f", serving: steering smoothed (alpha {self.smooth:g})" if self.smooth < 1 else ""))
+                + (f", serving: steering smoothed (alpha {self.smoothing:g})" if self.smoothing < 1 else ""))

@@ -41,12 +41,12 @@ class DriveConfig:
 
     law: ControlLaw = ControlLaw()
     speed_unit: SpeedUnit = SpeedUnit.MPH
-    smooth: float | None = None
+    smoothing: float | None = None
     monitor: MonitorPolicy = MonitorPolicy()  # what is done with the model's monitor, if it carries one
 
     def __post_init__(self) -> None:
-        if self.smooth is not None:
-            check_alpha(self.smooth)
+        if self.smoothing is not None:
+            check_alpha(self.smoothing)
 
 
 class DrivePipeline:
@@ -58,7 +58,7 @@ class DrivePipeline:
         self.law = config.law
         self.contract = model.contract
         self.reduce = jpeg_reduction(model.contract)
-        self.smooth = model.smooth if config.smooth is None else config.smooth
+        self.smoothing = model.smoothing if config.smoothing is None else config.smoothing
         self._slow_laws: dict[float, ControlLaw] = {}
         found = model.monitor() if config.monitor.mode != "off" else None
         self.monitor_spec: MonitorSpec | None = found[0] if found is not None else None
@@ -72,7 +72,7 @@ class DrivePipeline:
 
     def smoother(self) -> SteeringSmoother | None:
         """A new client's smoothing state (None when off: nothing to keep)."""
-        return SteeringSmoother(self.smooth) if self.smooth < OFF else None
+        return SteeringSmoother(self.smoothing) if self.smoothing < OFF else None
 
     def steer(self, rgb: np.ndarray, smoother: SteeringSmoother | None = None,
               monitor: ClientMonitor | None = None) -> float:

@@ -34,10 +34,10 @@ def test_the_ensemble_answers_the_mean_of_its_members_and_keeps_their_contract(t
     assert np.ptp(answers, axis=0).min() > 1e-3  # the members disagree: the mean means something
     assert np.allclose(_run(out, x), answers.mean(axis=0), atol=1e-6)
     served = SteeringModel(out)
-    assert served.contract == SteeringModel(members[0]).contract and served.smooth == 0.5
+    assert served.contract == SteeringModel(members[0]).contract and served.smoothing == 0.5
     meta = ort.InferenceSession(str(out)).get_modelmeta().custom_metadata_map
     info = json.loads(meta[METADATA_MODEL_INFO_KEY])
-    assert [m["file"] for m in info["ensemble"]] == ["m0.onnx", "m1.onnx", "m2.onnx"] and info["serve_smooth"] == 0.5
+    assert [m["file"] for m in info["ensemble"]] == ["m0.onnx", "m1.onnx", "m2.onnx"] and info["smoothing"] == 0.5
 
 
 def test_the_members_smoothing_is_kept_when_they_agree_and_must_be_chosen_when_they_do_not(tmp_path: Path) -> None:
@@ -45,11 +45,11 @@ def test_the_members_smoothing_is_kept_when_they_agree_and_must_be_chosen_when_t
     smoothed = tmp_path / "s.onnx"
     assert rbc(["mirror", str(plain[1]), "--out", str(smoothed), "--serve-smooth", "0.5"]) == 0
     assert rbc(["ensemble", *map(str, plain), "--out", str(tmp_path / "a.onnx")]) == 0
-    assert SteeringModel(tmp_path / "a.onnx").smooth == 1.0
+    assert SteeringModel(tmp_path / "a.onnx").smoothing == 1.0
     assert rbc(["ensemble", str(plain[0]), str(smoothed), "--out", str(tmp_path / "b.onnx")]) == 2
     assert rbc(["ensemble", str(plain[0]), str(smoothed), "--out", str(tmp_path / "b.onnx"),
                 "--serve-smooth", "1"]) == 0
-    assert SteeringModel(tmp_path / "b.onnx").smooth == 1.0
+    assert SteeringModel(tmp_path / "b.onnx").smoothing == 1.0
 
 
 def test_bad_members_and_paths_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

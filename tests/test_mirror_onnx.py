@@ -39,12 +39,13 @@ def test_the_mirrored_model_is_half_the_difference_of_the_original_on_a_frame_an
     assert np.allclose(_run(out, flipped), -got, atol=1e-6)
     assert np.allclose([_run(out, x[i:i + 1])[0] for i in range(len(x))], got, atol=1e-6)  # batch of 1 too
     served = SteeringModel(out)
-    assert served.contract == SteeringModel(original).contract and served.smooth == 0.5
+    assert served.contract == SteeringModel(original).contract and served.smoothing == 0.5
     import onnxruntime
 
     meta = onnxruntime.InferenceSession(str(out)).get_modelmeta().custom_metadata_map
     info = json.loads(meta[METADATA_MODEL_INFO_KEY])
-    assert info["mirror_average"] is True and info["serve_smooth"] == 0.5 and METADATA_KEY in meta
+    assert info["mirror_average"] is True and info["smoothing"] == 0.5 and METADATA_KEY in meta
+    assert "serve_smooth" not in info  # the one name
 
 
 def test_bad_models_and_paths_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

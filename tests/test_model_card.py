@@ -65,7 +65,7 @@ def _record(**kw) -> dict:
 def _card(record: dict, model: str = "models/pretrained/x.onnx", recipe_name: str = "", **info) -> str:
     c = record["config"]
     info = {"parameters": 14065, "camera_rig": "unity", "mirror_average": c["mirror_average"], **info}
-    smooth = info.pop("smooth", c["serve_smoothing"])
+    smooth = info.pop("smooth", c["smoothing"])
     home = {"rigorous": "--track mountain", "collision": "--track lake --cones 20 --cone-seed 1"}
     return card(CardSource(RunRecord.from_dict(record), ModelFile(Path(model), info, record["contract"], smooth),
                            Path(model).with_suffix(".toml"), home.get(c["behavior"], "--track lake"),

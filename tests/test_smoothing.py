@@ -12,6 +12,7 @@ import pytest
 from helpers_server import SAMPLE_LOG, build_shallow, run_server_cli
 
 from drive_server.model import ModelError, SteeringModel
+from drive_server.models_dir import default_model_path
 from drive_server.pipeline import DriveConfig, DrivePipeline
 from drive_server.smoothing import SERVING_KEY, SteeringSmoother, check_alpha, serving_json
 from protocol import parse_telemetry
@@ -27,7 +28,7 @@ def test_each_command_is_alpha_of_the_new_output_and_the_rest_of_the_last() -> N
     assert s(-0.4) == pytest.approx(0.25 * -0.4 + 0.75 * 0.6)
     off = SteeringSmoother(1.0)
     assert [off(v) for v in (0.3, -0.9, 0.1)] == [0.3, -0.9, 0.1]
-    assert DriveConfig().smooth is None  # the model's own
+    assert DriveConfig().smoothing is None  # the model's own
 
 
 @pytest.mark.parametrize("alpha", [0.0, -0.5, 1.5, math.nan, math.inf])
@@ -35,7 +36,7 @@ def test_a_weight_outside_0_to_1_is_refused(alpha: float) -> None:
     with pytest.raises(ValueError, match="above 0 and at most 1"):
         check_alpha(alpha)
     with pytest.raises(ValueError):
-        DriveConfig(smooth=alpha)
+        DriveConfig(smoothing=alpha)
 
 
 @pytest.fixture(scope="module")
@@ -66,13 +67,23 @@ def _with_serving(model: Path, out: Path, value: str) -> Path:
 def test_a_model_carries_its_smoothing_and_a_flag_overrides_it(model: Path, tmp_path: Path) -> None:
     asks = _with_serving(model, tmp_path / "asks.onnx", serving_json(0.5))
     assert DrivePipeline(SteeringModel(model)).smoother() is None  # no metadata: off
-    assert DrivePipeline(SteeringModel(asks)).smooth == 0.5
-    assert DrivePipeline(SteeringModel(asks), DriveConfig(smooth=1.0)).smoother() is None
-    assert DrivePipeline(SteeringModel(model), DriveConfig(smooth=0.3)).smooth == 0.3
+    assert DrivePipeline(SteeringModel(asks)).smoothing == 0.5
+    assert DrivePipeline(SteeringModel(asks), DriveConfig(smoothing=1.0)).smoother() is None
+    assert DrivePipeline(SteeringModel(model), DriveConfig(smoothing=0.3)).smoothing == 0.3
     assert "smoothed (alpha 0.5)" in SteeringModel(asks).describe()
 
 
-@pytest.mark.parametrize("value", ['{"smooth": 0}', '{"smooth": "half"}', "[0.5]", '{"smooth": 0.5, "x": 1}', "{"])
+def test_the_smoothing_has_one_name_and_files_written_before_it_still_read(model: Path, tmp_path: Path) -> None:
+    """Issue 51: the value was serve_smoothing (recipe), serve_smooth (record), smooth (metadata JSON)."""
+    assert json.loads(serving_json(0.5)) == {"smoothing": 0.5}
+    old = _with_serving(model, tmp_path / "old.onnx", '{"smooth": 0.25}')  # as every model written before
+    assert SteeringModel(old).smoothing == 0.25
+    for bundled in ("unity", "generalist"):  # both written before the one name, both ask for 0.5
+        assert SteeringModel(default_model_path().with_name(f"{bundled}.onnx")).smoothing == 0.5
+
+
+@pytest.mark.parametrize("value", ['{"smooth": 0}', '{"smooth": "half"}', "[0.5]", '{"smooth": 0.5, "x": 1}', "{",
+                                   '{"smoothing": 0}', '{"smoothing": 0.5, "smooth": 0.5}'])
 def test_a_malformed_serving_entry_is_one_line(model: Path, tmp_path: Path, value: str) -> None:
     bad = _with_serving(model, tmp_path / "bad.onnx", value)
     with pytest.raises(ModelError, match=f"bad.onnx: .*{SERVING_KEY}|bad.onnx: steering smoothing") as info:

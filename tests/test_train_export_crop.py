@@ -97,9 +97,9 @@ def _frames_and_network_outputs(result) -> tuple[np.ndarray, ...]:
     return x, mirrored, _torch_outputs(checkpoint["model"], x), _torch_outputs(checkpoint["model"], mirrored)
 
 
-def test_mirror_average_and_serve_smoothing_are_exported_and_recorded(tmp_path: Path) -> None:
+def test_mirror_average_and_smoothing_are_exported_and_recorded(tmp_path: Path) -> None:
     result = train(_config(tmp_path / "mirror", epochs=1, max_steps_per_epoch=2, export="last", mirror_average=True,
-                           serve_smoothing=0.5))
+                           smoothing=0.5))
     x, mirrored, plain, plain_mirrored = _frames_and_network_outputs(result)
     assert np.abs(plain + plain_mirrored).max() > 1e-3  # the trained network alone is not symmetric
     got, got_mirrored = _onnx_outputs(result.onnx, x), _onnx_outputs(result.onnx, mirrored)
@@ -109,9 +109,9 @@ def test_mirror_average_and_serve_smoothing_are_exported_and_recorded(tmp_path: 
         METADATA_MODEL_INFO_KEY])
     record = json.loads((result.run_dir / "config.json").read_text())
     assert meta["mirror_average"] is True and record["config"]["mirror_average"] is True
-    assert SteeringModel(result.onnx).smooth == 0.5 and record["config"]["serve_smoothing"] == 0.5
+    assert SteeringModel(result.onnx).smoothing == 0.5 and record["config"]["smoothing"] == meta["smoothing"] == 0.5
     assert record["recipe"]["export"] == meta["recipe"]["export"] == {"mirror_average": True, "output_scale": 1.0,
-                                                                      "serve_smoothing": 0.5}
+                                                                      "smoothing": 0.5}
 
 
 def test_output_scale_multiplies_what_is_exported_and_is_recorded(tmp_path: Path) -> None:

@@ -19,7 +19,7 @@ from onnx import compose, helper
 
 from drive_server import runrecords
 from drive_server.contract import PreprocessContract
-from drive_server.smoothing import SERVING_KEY, serving_alpha
+from drive_server.smoothing import NAME, OLD_NAMES, SERVING_KEY, serving_alpha
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 from protocol.errors import BadValue
 
@@ -30,10 +30,10 @@ class EnsembleError(BadValue):
     """The models cannot be averaged into one; the message is one line."""
 
 
-def _serving(srcs: Sequence[Path], metas: Sequence[dict[str, str]], serve_smooth: float | None) -> float:
-    """The smoothing the ensemble asks for: ``serve_smooth`` if given, else the members' (which must agree)."""
-    if serve_smooth is not None:
-        return serve_smooth
+def _serving(srcs: Sequence[Path], metas: Sequence[dict[str, str]], smoothing: float | None) -> float:
+    """The smoothing the ensemble asks for: ``smoothing`` if given, else the members' (which must agree)."""
+    if smoothing is not None:
+        return smoothing
     try:
         asked = {serving_alpha(m.get(SERVING_KEY)) for m in metas}
     except ValueError as exc:
@@ -44,9 +44,9 @@ def _serving(srcs: Sequence[Path], metas: Sequence[dict[str, str]], serve_smooth
     return asked.pop()
 
 
-def ensemble_onnx(srcs: Sequence[Path], dst: Path, serve_smooth: float | None = None, seed: int = 0) -> float:
+def ensemble_onnx(srcs: Sequence[Path], dst: Path, smoothing: float | None = None, seed: int = 0) -> float:
     """Write ``dst`` (atomically): the mean of ``srcs``' outputs. Return the max |ensemble - mean of members| on
-    random inputs (``seed``). ``serve_smooth`` (< 1 smooths, 1 does not) overrides what the members ask."""
+    random inputs (``seed``). ``smoothing`` (< 1 smooths, 1 does not) overrides what the members ask."""
     if len(srcs) < 2:
         raise EnsembleError("an ensemble needs at least two models")
     members = [read_steering_graph(s, EnsembleError) for s in srcs]
@@ -61,7 +61,7 @@ def ensemble_onnx(srcs: Sequence[Path], dst: Path, serve_smooth: float | None = 
                                 "same input")
         if opsets(member.proto) != opsets(first.proto):
             raise EnsembleError(f"{src}: its ONNX opset differs from {srcs[0].name}'s")
-    alpha = _serving(srcs, [m.meta for m in members], serve_smooth)
+    alpha = _serving(srcs, [m.meta for m in members], smoothing)
 
     image = next(i for i in first.proto.graph.input if i.name == first.input_name)
     nodes, initializers, outputs = [], [], []
@@ -77,7 +77,8 @@ def ensemble_onnx(srcs: Sequence[Path], dst: Path, serve_smooth: float | None = 
     out = helper.make_model(graph, opset_imports=list(first.proto.opset_import), ir_version=first.proto.ir_version)
 
     info = {**first.info, "ensemble": [{"file": Path(s).name, **m.info} for s, m in zip(srcs, members, strict=True)]}
-    info.pop("serve_smooth", None)  # the members' request; set_model_metadata records the ensemble's
+    for key in (NAME, *OLD_NAMES):  # the members' request; set_model_metadata records the ensemble's
+        info.pop(key, None)
     set_model_metadata(out, info, alpha, first.contract)
     onnx.checker.check_model(out)
     with runrecords.atomic_path(Path(dst)) as tmp:

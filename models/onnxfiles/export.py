@@ -41,10 +41,10 @@ class ExportError(UserError, RuntimeError):
 
 
 def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, Any], path: Path,
-                frames: np.ndarray, serve_smooth: float = OFF) -> float:
+                frames: np.ndarray, smoothing: float = OFF) -> float:
     """Write ``path`` (atomically) and return the max |ORT - torch| on ``frames`` (uint8 network images).
 
-    ``serve_smooth`` < 1: the model asks drive_server to smooth each client's steering so (``rbc.serving``).
+    ``smoothing`` < 1: the model asks drive_server to smooth each client's steering so (``rbc.serving``).
     """
     model = ContractInput(net, contract.layout).eval()
     dummy = torch.zeros(contract.input_shape, dtype=torch.float32)
@@ -56,7 +56,7 @@ def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, An
                               input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
                               dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}})
         proto = onnx.load(str(tmp))
-        set_model_metadata(proto, info, serve_smooth, contract)
+        set_model_metadata(proto, info, smoothing, contract)
         proto.producer_name = "robust-behavioral-cloning"
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))

@@ -33,10 +33,10 @@ class MirrorError(BadValue):
     """The model cannot be mirror-averaged; the message is one line."""
 
 
-def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: int = 0,
+def mirror_average_onnx(src: Path, dst: Path, smoothing: float = OFF, seed: int = 0,
                         output_scale: float = 1.0) -> float:
     """Write ``dst`` (atomically) from ``src``; return the max |mirrored - S (f(x) - f(mirror x)) / 2| on random
-    inputs (``seed``), S = ``output_scale`` (as ``rbc train --output-scale``). ``serve_smooth`` < 1 also asks
+    inputs (``seed``), S = ``output_scale`` (as ``rbc train --output-scale``). ``smoothing`` < 1 also asks
     drive_server to smooth each client's steering so."""
     try:
         check_output_scale(output_scale)
@@ -72,7 +72,7 @@ def mirror_average_onnx(src: Path, dst: Path, serve_smooth: float = OFF, seed: i
     del graph.value_info[:]  # shapes inside changed (batch 2N); ONNX Runtime infers them again
 
     scale = {"output_scale": float(info.get("output_scale", 1.0)) * output_scale} if output_scale != 1.0 else {}
-    set_model_metadata(proto, {**info, "mirror_average": True, **scale}, serve_smooth)
+    set_model_metadata(proto, {**info, "mirror_average": True, **scale}, smoothing)
     onnx.checker.check_model(proto)
     with runrecords.atomic_path(Path(dst)) as tmp:
         onnx.save(proto, str(tmp))

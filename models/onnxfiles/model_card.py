@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
-from drive_server.smoothing import OFF, SERVING_KEY, serving_alpha
+from drive_server.smoothing import NAME, OFF, OLD_NAMES, SERVING_KEY, serving_alpha
 from models.networks.architectures import ARCHITECTURES
 from models.networks.runfiles import RunPaths, RunRecord
 from protocol.errors import BadValue
@@ -42,7 +42,7 @@ class ModelFile:
     path: Path  # as the card's commands name it
     info: dict[str, Any]  # its record (rbc.model); {} if none
     contract: dict[str, Any]  # its preprocessing (rbc.preprocess); {} if none
-    smooth: float = OFF  # the steering smoothing it asks drive_server for (1: off)
+    smoothing: float = OFF  # the steering smoothing it asks drive_server for (1: off)
 
 
 @dataclass(frozen=True)
@@ -228,7 +228,7 @@ def _training(src: CardSource) -> str:
 
 
 def _answer(src: CardSource) -> str:
-    info, c, smooth = src.model.info, src.record.config, src.model.smooth
+    info, c, smooth = src.model.info, src.record.config, src.model.smoothing
     mirror, scale = bool(info.get("mirror_average")), float(info.get("output_scale", 1.0))
     if not mirror and scale == 1.0 and smooth == OFF:
         return "the network's steering, as trained."
@@ -257,8 +257,9 @@ def _file_command(src: CardSource, c: dict[str, Any]) -> list[str]:
     words = ["cp", made.as_posix(), src.model.path.as_posix()]
     if src.model.info.get("mirror_average") and not c.get("mirror_average"):
         words = ["rbc", "mirror", made.as_posix(), "--out", src.model.path.as_posix()]
-        if src.model.smooth != c.get("serve_smoothing", OFF):
-            words += ["--serve-smooth", f"{src.model.smooth:g}"]
+        asked = next((c[k] for k in (NAME, *OLD_NAMES) if k in c), OFF)  # a run stored before the one name: old
+        if src.model.smoothing != asked:
+            words += ["--serve-smooth", f"{src.model.smoothing:g}"]
         scale = float(src.model.info.get("output_scale", 1.0)) / float(c.get("output_scale", 1.0))
         words += ["--output-scale", f"{scale:g}"] if scale != 1.0 else []
     return [_command(words)]

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
-from drive_server.smoothing import OFF, SERVING_KEY, serving_json
+from drive_server.smoothing import NAME, OFF, OLD_NAMES, SERVING_KEY, serving_json
 
 
 @dataclass(frozen=True)
@@ -53,18 +53,20 @@ def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
                          info if isinstance(info, dict) else {})
 
 
-def set_model_metadata(proto: Any, info: dict[str, Any], serve_smooth: float = OFF,
+def set_model_metadata(proto: Any, info: dict[str, Any], smoothing: float = OFF,
                        contract: PreprocessContract | None = None) -> None:
-    """Replace ``proto``'s model info (and its contract, if given) and ask for ``serve_smooth`` (< 1); keys the
+    """Replace ``proto``'s model info (and its contract, if given) and ask for ``smoothing`` (< 1); keys the
     model already carries otherwise stay."""
     meta = {p.key: p.value for p in proto.metadata_props}
     if contract is not None:
         meta[METADATA_KEY] = contract.to_json()
-    if serve_smooth < OFF:  # the model's record says what it asks, as rbc train's does
-        info = {**info, "serve_smooth": serve_smooth}
+    old = [k for k in OLD_NAMES if k in info]  # a record written before the one name: it says it in that name
+    info = {**{k: v for k, v in info.items() if k not in old}, **({NAME: info[old[0]]} if old else {})}
+    if smoothing < OFF:  # the model's record says what it asks, as rbc train's does
+        info[NAME] = smoothing
     meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
-    if serve_smooth < OFF:
-        meta[SERVING_KEY] = serving_json(serve_smooth)
+    if smoothing < OFF:
+        meta[SERVING_KEY] = serving_json(smoothing)
     del proto.metadata_props[:]
     for key, value in meta.items():
         proto.metadata_props.add(key=key, value=value)

@@ -21,7 +21,7 @@ from drive_server.runrecords import write_text
 from models.data.behavior import Approach, Arch
 from models.data.split import SplitKind
 from models.networks.runfiles import MODEL, RunRecord
-from models.training.train_config import BRIGHTNESS_MODES, EXPORTS, REMOVED, RENAMED, TrainConfig
+from models.training.train_config import BRIGHTNESS_MODES, EXPORTS, REMOVED, RENAMED, RENAMED_IN_RECIPES, TrainConfig
 from protocol.errors import BadValue
 from protocol.facts import BEHAVIORS
 from protocol.units import SpeedUnit
@@ -85,8 +85,8 @@ SECTIONS: dict[str, dict[str, str]] = {
                           "cancelled (not for a behavior that keeps to one lane); training is unchanged",
         "output_scale": "not in the paper: the exported steering times this, 0.1..2 (below 1 answers new drivers "
                         "more gently); training is unchanged",
-        "serve_smoothing": "written into the model: drive_server smooths each client's steering with this weight of "
-                           "the new output, 0 < w <= 1 (1: off) unless its --smooth says otherwise",
+        "smoothing": "written into the model: drive_server smooths each client's steering with this weight of "
+                     "the new output, 0 < w <= 1 (1: off) unless its --smooth says otherwise",
     },
 }
 #: TrainConfig fields no recipe holds: where the data is and how this machine runs it (the command line's).
@@ -143,7 +143,11 @@ def read_recipe(path: Path) -> dict[str, Any]:
                            f"(sections: {', '.join(f'[{s}]' for s in SECTIONS)})")
         if section not in SECTIONS:
             raise BadValue(f"{path}: [{section}]: unknown section (known: {', '.join(SECTIONS)})")
-        for key, value in table.items():
+        for old, value in table.items():
+            new = RENAMED_IN_RECIPES.get(old, "")
+            key = new if new in SECTIONS[section] else old
+            if key != old and key in table:
+                raise BadValue(f"{path}: [{section}] {old} and {key}: the same setting twice ({old} is its old name)")
             if key not in SECTIONS[section]:
                 raise BadValue(f"{path}: [{section}] {key}: unknown key{_belongs(key, section)} "
                                f"(known: {', '.join(SECTIONS[section])})")
@@ -176,6 +180,11 @@ def recipe_sections(config: TrainConfig) -> dict[str, dict[str, Any]]:
     return {section: {key: _plain(getattr(full, key)) for key in keys} for section, keys in SECTIONS.items()}
 
 
+def renamed_sections(sections: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Recorded recipe ``sections`` (a run's record, a model file's) with their keys in today's names."""
+    return {section: {RENAMED.get(k, k): v for k, v in keys.items()} for section, keys in sections.items()}
+
+
 def recipe_toml(config: TrainConfig, source: str | None = None) -> str:
     """``config`` as a recipe file: every key with what it is for (``rbc train --print``); read back, it gives
     the same run."""
@@ -199,7 +208,7 @@ def sections_toml(sections: dict[str, dict[str, Any]], header: list[str]) -> str
 def run_recipe(run: RunRecord) -> dict[str, dict[str, Any]]:
     """A run's recipe, resolved, from its record (one written before records held it: from its config)."""
     if run.recipe is not None:
-        return run.recipe
+        return renamed_sections(run.recipe)
     return recipe_sections(TrainConfig.from_dict(run.config, str(run.config_path)))
 
 

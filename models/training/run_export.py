@@ -83,10 +83,10 @@ def finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tra
             "split": config.split, "export": config.export, "exported_epoch": exported_epoch,
             "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"], "camera_rig": data_rig(config.data),
             "mirror_average": config.mirror_average, "output_scale": config.output_scale,
-            "serve_smooth": config.serve_smoothing, "recipe": recipe_sections(config)}
+            "smoothing": config.smoothing, "recipe": recipe_sections(config)}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = runfiles.RunPaths(run_dir).model
-    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.serve_smoothing)
+    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.smoothing)
     runfiles.write_result(run_dir, {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
                                     "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,
                                     "rows": data.counts, "onnx_max_diff": diff, "val_by_recording": by_recording})

@@ -31,7 +31,9 @@ SCALE_BRIGHTNESS_RANGE = 0.5
 #: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
 LEGACY = {"split": "random", "export": "last"}
 #: Keys of stored runs renamed since (old -> new), so run configs written before still load.
-RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "serve_smoothing"}
+RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "smoothing", "serve_smoothing": "smoothing"}
+#: Recipe keys renamed since recipes exist (old -> new, same section), so a recipe file written before still loads.
+RENAMED_IN_RECIPES = {"serve_smoothing": "smoothing"}
 #: Knobs removed because they were measured useless (docs/experiments.md), with the value that did nothing: a stored
 #: run holding that value still loads, one holding another cannot be reproduced any more.
 REMOVED = {"label_lag": 0, "recovery_distance": None}
@@ -115,7 +117,7 @@ class TrainConfig:
     output_scale: float = 1.0
     # how drive_server smooths each client's steering unless told otherwise: the weight of the new output
     # (drive_server.smoothing; 1: off), written into the model's metadata
-    serve_smoothing: float = 1.0
+    smoothing: float = 1.0
     # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
@@ -145,8 +147,8 @@ class TrainConfig:
                            f"left-right asymmetric task (trained without flips); the average would steer it to the "
                            f"road's middle")
         check_output_scale(self.output_scale)
-        if not 0.0 < self.serve_smoothing <= 1.0:
-            raise BadValue(f"serve smoothing must be above 0 and at most 1 (1: off), got {self.serve_smoothing}")
+        if not 0.0 < self.smoothing <= 1.0:
+            raise BadValue(f"smoothing must be above 0 and at most 1 (1: off), got {self.smoothing}")
         if not 0.0 <= self.centre_gain <= 1.0:
             raise BadValue(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
         if not 0.0 <= self.edge_gain <= 1.0:

@@ -15,7 +15,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="the ensemble to write (.onnx)")
     p.add_argument("--serve-smooth", type=float, default=None, metavar="ALPHA",
                    help="ask drive_server to smooth each client's steering with this weight of the new output, "
-                        "as a recipe's [export] serve_smoothing (1: off; default: what the members ask, which must "
+                        "as a recipe's [export] smoothing (1: off; default: what the members ask, which must "
                         "agree)")
 
 

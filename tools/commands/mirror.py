@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="the mirror-averaged model to write (.onnx)")
     p.add_argument("--serve-smooth", type=float, default=1.0, metavar="ALPHA",
                    help="also ask drive_server to smooth each client's steering with this weight of the new output, "
-                        "as a recipe's [export] serve_smoothing (default %(default)s: off)")
+                        "as a recipe's [export] smoothing (default %(default)s: off)")
     p.add_argument("--output-scale", type=float, default=1.0, metavar="S",
                    help="the mirrored model answers S times the average, as a recipe's [export] output_scale (0.1..2; "
                         "default %(default)s)")

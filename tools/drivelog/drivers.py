@@ -27,7 +27,7 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
         from drive_server.model import SteeringModel
         from drive_server.pipeline import DriveConfig, DrivePipeline
 
-        pipeline = DrivePipeline(SteeringModel(Path(model)), DriveConfig(smooth=smooth))
+        pipeline = DrivePipeline(SteeringModel(Path(model)), DriveConfig(smoothing=smooth))
         smoother = pipeline.smoother()
         monitor = pipeline.client_monitor()  # the model's misbehaviour monitor, if its file carries one (warn)
 
@@ -38,7 +38,7 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
                 readings.append((i, int(reading.level) if reading is not None else 0))
             return steering
 
-        name = Path(model).name + (f" smoothed {pipeline.smooth:g}" if smoother is not None else "")
+        name = Path(model).name + (f" smoothed {pipeline.smoothing:g}" if smoother is not None else "")
     elif baseline == "recorded":
         def base(view: np.ndarray, i: int) -> float:
             return float(log.steering[i])

@@ -29,7 +29,7 @@ class OnnxPolicy:
     ``info["jpeg"]`` (``jpeg=False``) the model reads the full-size frame, resized by its contract: within a few
     grey levels of what drive_server would feed it."""
 
-    def __init__(self, path: str | Path, control: str = "steer", smooth: float | None = None, threads: int = 1,
+    def __init__(self, path: str | Path, control: str = "steer", smoothing: float | None = None, threads: int = 1,
                  law: ControlLaw | None = None) -> None:
         if control not in CONTROLS:
             raise BadValue(f"control must be one of {', '.join(CONTROLS)}, got {control!r}")
@@ -37,7 +37,7 @@ class OnnxPolicy:
         model.warm_up()
         self.control = control
         self.pipeline = DrivePipeline(model, DriveConfig(law=law or ControlLaw(), speed_unit=SpeedUnit.KMH,
-                                                         smooth=smooth))
+                                                         smoothing=smoothing))
         self.smoother: SteeringSmoother | None = self.pipeline.smoother()
         #: the camera rig the model learnt (its record; ``rbc sim --model`` shows it the same): make the env with it
         self.camera_rig = model_rig(path)

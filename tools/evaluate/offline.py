@@ -61,7 +61,7 @@ def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, fl
 def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
                 on_frame: Callable[[], None] | None = None, smooth_frames: int = 0,
                 smooth: float | None = None) -> OfflineScore:
-    pipeline = DrivePipeline(SteeringModel(model_path), DriveConfig(smooth=smooth))
+    pipeline = DrivePipeline(SteeringModel(model_path), DriveConfig(smoothing=smooth))
     smoother = pipeline.smoother()
     pred = np.empty(len(frames))
     for i, (path, _) in enumerate(frames):
@@ -71,7 +71,7 @@ def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
     truth = np.array([steering for _, steering in frames])
     m = steering_metrics(pred, truth)
     score = OfflineScore(model=str(model_path), frames=int(m["n"]), mse=m["mse"], pearson_r=m["r"],
-                         zero_mse=m["zero_mse"], smooth=pipeline.smooth)
+                         zero_mse=m["zero_mse"], smooth=pipeline.smoothing)
     if smooth_frames > 1:
         intent = centred_average(truth, smooth_frames)
         ms = steering_metrics(pred, intent)
