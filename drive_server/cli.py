@@ -18,7 +18,6 @@ import cv2
 from drive_server import listen
 from drive_server.control import ControlLaw
 from drive_server.guard import FallbackPolicy
-from drive_server.helpformat import DefaultsHelpFormatter
 from drive_server.limits import WireLimits
 from drive_server.model import InferenceConfig, ModelError, SteeringModel
 from drive_server.models_dir import default_model_path
@@ -27,6 +26,7 @@ from drive_server.pipeline import DriveConfig
 from drive_server.server_config import ServerConfig
 from protocol import SpeedUnit
 from protocol.errors import BadValue, UserError
+from protocol.helpformat import DefaultsHelpFormatter
 
 log = logging.getLogger("drive_server")
 

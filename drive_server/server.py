@@ -28,10 +28,10 @@ from drive_server.limits import (
 )
 from drive_server.patches import eventlet_engineio as wire
 from drive_server.pipeline import DrivePipeline, InferenceError
-from drive_server.runrecords import write_json
 from drive_server.stats import FaultCounters, LatencyStats, save_stats, summarize, summary_line
 from drive_server.transport import install
 from protocol import ProtocolError, encode_steer, parse_telemetry
+from protocol.runrecords import write_json
 
 warnings.filterwarnings("ignore", message=r"\s*Eventlet is deprecated")  # printed on import; says nothing to users
 import eventlet  # noqa: E402

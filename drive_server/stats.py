@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from drive_server.runrecords import atomic_path
+from protocol.runrecords import atomic_path
 
 #: Pipeline stages, in order; ``total`` is handler entry to reply queued.
 STAGES = ("decode", "preprocess", "inference", "control", "total")

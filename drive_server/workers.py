@@ -30,10 +30,10 @@ from typing import Any
 
 from drive_server import listen
 from drive_server.model import SteeringModel
-from drive_server.runrecords import write_json
 from drive_server.server import DriveServer, ServerConfig, stats_document
 from drive_server.stats import FaultCounters, load_stats, summarize, summary_line
 from drive_server.transport import TransportTuning
+from protocol.runrecords import write_json
 
 log = logging.getLogger(__name__)
 

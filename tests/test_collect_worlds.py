@@ -11,8 +11,8 @@ from pathlib import Path
 import cv2
 import pytest
 
-from drive_server.runrecords import file_sha256
 from protocol.datalog import read_log
+from protocol.runrecords import file_sha256
 from tools.cli import main
 from tools.sim.collect.dataset import CollectConfig
 from tools.sim.collect.worlds import WorldsConfig, collect_worlds, world_collect_seed, world_light_intensity

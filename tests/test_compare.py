@@ -71,7 +71,7 @@ def test_range_chart_reads_offsets_caps_and_empty_ranges(tmp_path):
 
 def test_compare_finds_an_evaluated_model_from_another_folder_and_refuses_a_moved_or_changed_one(tmp_path,
                                                                                                  monkeypatch):
-    from drive_server.runrecords import file_sha256
+    from protocol.runrecords import file_sha256
     from tools.errors import CommandError
     from tools.evaluate.compare import evaluated_model
 

@@ -12,9 +12,9 @@ import pytest
 pytest.importorskip("gymnasium", reason="the gym extra is not installed (pip install -e '.[gym]')")
 pytest.importorskip("torch", reason="the train extra is not installed")
 
-from drive_server.runrecords import file_sha256, read_json  # noqa: E402
 from protocol.datalog_writer import LOG_NAME  # noqa: E402
 from protocol.errors import BadValue  # noqa: E402
+from protocol.runrecords import file_sha256, read_json  # noqa: E402
 from tools.dagger import loop, rollout  # noqa: E402
 from tools.dagger.config import DaggerConfig, budgets_from  # noqa: E402
 from tools.dagger.report import comparison_table, frames_to_target, plot_curve, verdict  # noqa: E402

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from drive_server.runrecords import read_json
 from protocol.errors import BadValue
+from protocol.runrecords import read_json
 from tests.scratch_code import STUBS, edit, write_tree
 from tools.dagger import loop, scoring
 from tools.dagger.config import DaggerConfig

@@ -62,7 +62,8 @@ def test_protocol_imports_nothing_of_ours():
 
 
 def test_the_log_format_and_facts_are_stdlib_only():
-    for name in ("protocol.datalog", "protocol.datalog_writer", "protocol.facts", "protocol.errors"):
+    for name in ("protocol.datalog", "protocol.datalog_writer", "protocol.facts", "protocol.errors",
+                 "protocol.runrecords", "protocol.helpformat"):
         imports = _imports(MODULES[name])
         outside = [i for i in imports if i.split(".")[0] not in STDLIB and not i.startswith("protocol.")]
         assert outside == [], name
@@ -103,6 +104,42 @@ def test_no_module_sits_loose_in_the_simulator_and_no_room_is_crowded():
 
 def test_models_never_import_tools():
     assert _violations("models", ("tools",)) == []
+
+
+#: The drive_server modules that are the serving contract: what a model file is and carries for drive_server to serve
+#: it as it was trained and measured. models writes and checks its files against these, so the two cannot drift;
+#: every other drive_server module (the wire, the workers, observing) is the server's own and models never needs it.
+SERVING_CONTRACT = {
+    "drive_server.contract": "the preprocessing contract and the ONNX metadata keys it travels under",
+    "drive_server.preprocess": "THE preprocessing function: training feeds the network the pixels serving does",
+    "drive_server.smoothing": "the steering smoothing's name and its metadata (rbc.serving) that a model carries",
+    "drive_server.monitor": "the monitor's spec, metadata keys and one-second window that a model file carries",
+    "drive_server.model": "the server's model loader: the monitor's fit and attach read a model back as it is served",
+}
+
+
+def _outside_the_serving_contract(modules: dict[str, Path]) -> list[str]:
+    return [f"{name} imports {imp}" for name, path in modules.items() for imp in sorted(_imports(path))
+            if imp.split(".")[0] == "drive_server" and imp not in SERVING_CONTRACT]
+
+
+def test_models_import_of_drive_server_only_the_serving_contract():
+    """Issue 51: models imported drive_server's file writer to write a recipe (models.training.recipe) and a run's
+    files; the writer and the help format now sit in protocol, and models leans on drive_server only where a model
+    file must match what the server reads. Every listed module is used: a stale entry would let one back in."""
+    in_models = {name: path for name, path in MODULES.items() if name.split(".")[0] == "models"}
+    assert _outside_the_serving_contract(in_models) == []
+    used = {imp for path in in_models.values() for imp in _imports(path) if imp in SERVING_CONTRACT}
+    assert used == set(SERVING_CONTRACT)
+
+
+def test_the_serving_contract_check_finds_another_drive_server_import(tmp_path):
+    module = tmp_path / "leaning.py"
+    module.write_text("from drive_server.contract import PreprocessContract\nimport drive_server.stats\n"
+                      "def f():\n    from drive_server import server\n")
+    assert _outside_the_serving_contract({"models.leaning": module}) == [
+        "models.leaning imports drive_server", "models.leaning imports drive_server.server",
+        "models.leaning imports drive_server.stats"]
 
 
 def test_command_modules_hold_no_library_code_and_do_not_import_each_other():

@@ -9,8 +9,8 @@ import stat
 
 import pytest
 
-from drive_server.runrecords import atomic_path, code_version, file_sha256, write_json, write_text
 from drive_server.stats import LatencyStats, save_stats
+from protocol.runrecords import atomic_path, code_version, file_sha256, write_json, write_text
 
 
 @pytest.fixture

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from importlib import metadata
 from types import ModuleType
 
-from drive_server.helpformat import DefaultsHelpFormatter
+from protocol.helpformat import DefaultsHelpFormatter
 from tools.console import console
 from tools.errors import is_user_error, one_line, remove_new_empty_outputs, snapshot
 

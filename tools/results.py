@@ -210,7 +210,7 @@ def measure(name: str, real: Path | None = None, root: Path = RESULTS) -> dict[s
     Each command runs in a fresh temporary folder that links the repository's ``models/`` and ``tests/``
     (and ``real/`` to ``real``, where the public recordings are), so its paths read as a user types them.
     """
-    from drive_server.runrecords import code_version
+    from protocol.runrecords import code_version
 
     record = load(name, root)
     if record["provenance"] != "measured":

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from drive_server.model import SteeringModel
 from drive_server.monitor import MONITOR_GRAPH_KEY, MONITOR_KEY, MonitorSpec, encode_graph
-from drive_server.runrecords import atomic_path
+from protocol.runrecords import atomic_path
 
 
 def attach_monitor(src: Path, dst: Path, spec: MonitorSpec, graph: bytes) -> None:

@@ -10,8 +10,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from drive_server import runrecords
 from models.networks import runfiles
+from protocol import runrecords
 from protocol.errors import UserError
 
 

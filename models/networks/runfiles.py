@@ -1,5 +1,5 @@
 """A training run's folder: the one module that names its files (config, history, checkpoint, model), reads them
-into a typed :class:`RunRecord` and writes them through the atomic writers of :mod:`drive_server.runrecords`, so a
+into a typed :class:`RunRecord` and writes them through the atomic writers of :mod:`protocol.runrecords`, so a
 crash or Ctrl-C never leaves half a file behind and no other module spells a file name or a record's keys again."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import write_json, write_text
 from protocol.errors import BadValue, UserError
+from protocol.runrecords import write_json, write_text
 
 CONFIG = "config.json"
 HISTORY = "history.csv"

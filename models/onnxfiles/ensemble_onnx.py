@@ -17,10 +17,10 @@ import onnx
 import onnxruntime as ort
 from onnx import compose, helper
 
-from drive_server import runrecords
 from drive_server.contract import PreprocessContract
 from drive_server.smoothing import NAME, OLD_NAMES, SERVING_KEY, serving_alpha
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
+from protocol import runrecords
 from protocol.errors import BadValue
 
 TOLERANCE = 1e-4

@@ -18,12 +18,12 @@ import onnxruntime as ort
 import torch
 from torch import nn
 
-from drive_server import runrecords
 from drive_server.contract import METADATA_KEY, PreprocessContract
 from drive_server.preprocess import to_input_tensor
 from drive_server.smoothing import OFF
 from models.networks.nets import ContractInput
 from models.onnxfiles.onnx_metadata import set_model_metadata
+from protocol import runrecords
 from protocol.errors import UserError
 
 log = logging.getLogger(__name__)

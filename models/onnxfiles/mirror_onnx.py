@@ -18,11 +18,11 @@ import onnx
 import onnxruntime as ort
 from onnx import helper, numpy_helper
 
-from drive_server import runrecords
 from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
 from drive_server.smoothing import OFF
 from models.data.behavior import check_output_scale, keeps_lane
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
+from protocol import runrecords
 from protocol.errors import BadValue
 
 TOLERANCE = 1e-4

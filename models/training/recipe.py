@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.contract import DECODE_REDUCTIONS
-from drive_server.runrecords import write_text
 from models.data.behavior import Approach, Arch
 from models.data.split import SplitKind
 from models.networks.runfiles import MODEL, RunRecord
 from models.training.train_config import BRIGHTNESS_MODES, EXPORTS, REMOVED, RENAMED, RENAMED_IN_RECIPES, TrainConfig
 from protocol.errors import BadValue
 from protocol.facts import BEHAVIORS
+from protocol.runrecords import write_text
 from protocol.units import SpeedUnit
 
 #: Each section of a recipe and its keys (TrainConfig fields), with why one would set the key.

@@ -11,7 +11,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from drive_server import runrecords
 from drive_server.preprocess import to_input_tensor
 from models.augmentation.fastaug import training_contract
 from models.data.behavior import Pipeline
@@ -23,6 +22,7 @@ from models.onnxfiles.export import export_onnx
 from models.training.metrics import metrics_by_group, steering_metrics
 from models.training.recipe import recipe_sections
 from models.training.train_config import TrainConfig
+from protocol import runrecords
 from protocol.rigfile import data_rig
 
 EXPORT_FRAMES = 32

@@ -8,12 +8,12 @@ from typing import Any
 
 import torch
 
-from drive_server import runrecords
 from models.data.behavior import Pipeline
 from models.data.split import SplitKind
 from models.data.trainingdata import PreparedData
 from models.training.recipe import recipe_sections
 from models.training.train_config import TrainConfig
+from protocol import runrecords
 
 
 def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, epochs: int,

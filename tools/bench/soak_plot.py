@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import atomic_path
+from protocol.runrecords import atomic_path
 
 
 def plot_soak(result: dict[str, Any], path: Path) -> Path | None:

@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
             print(format_table(result))
             results.append(result)
     if args.json is not None:
-        from drive_server.runrecords import write_json
+        from protocol.runrecords import write_json
 
         write_json(args.json, {"frames_source": source, "runs": [asdict(r) for r in results]})
         print(f"\nwrote {args.json}")

@@ -7,7 +7,7 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import write_text
+from protocol.runrecords import write_text
 from tools.errors import CommandError
 from tools.evaluate.compare import build_table, evaluated_model, measure_latency, training_summary
 from tools.evaluate.evalrecord import EvalRecord

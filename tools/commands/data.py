@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _crossval(args: argparse.Namespace) -> int:
-    from drive_server.runrecords import code_version, write_json
+    from protocol.runrecords import code_version, write_json
     from tools.console import Progress
     from tools.drivelog.loop import LoopRules
     from tools.errors import CommandError
@@ -237,7 +237,7 @@ def _fold(args: argparse.Namespace) -> int:
 
 
 def _stats(args: argparse.Namespace) -> int:
-    from drive_server.runrecords import code_version, write_json
+    from protocol.runrecords import code_version, write_json
     from tools.console import Progress
     from tools.errors import CommandError
     from tools.realdata.stats import combine, measure, summarise

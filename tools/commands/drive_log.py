@@ -86,7 +86,7 @@ def _rules(args: argparse.Namespace) -> LoopRules:
 
 
 def _drive(args: argparse.Namespace, samples: list) -> int:
-    from drive_server.runrecords import code_version, write_json
+    from protocol.runrecords import code_version, write_json
     from tools.console import Progress
     from tools.drivelog.path import recorded_drive
     from tools.drivelog.pictures import write_offset_plot, write_strip

@@ -10,7 +10,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from drive_server.model import SteeringModel
-from drive_server.runrecords import code_version, file_sha256, write_text
+from protocol.runrecords import code_version, file_sha256, write_text
 from tools.arguments import add_camera_argument, add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError

@@ -9,7 +9,7 @@ import argparse
 import time
 from pathlib import Path
 
-from drive_server.runrecords import write_json
+from protocol.runrecords import write_json
 from tools.bench.fuzz import fairness, memory_report, open_fds, rss_mib, settled_fds
 from tools.bench.fuzz_campaign import DEFAULT_LOG, campaign
 from tools.wire.frames import log_frames, synthetic_frames

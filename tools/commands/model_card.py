@@ -27,10 +27,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    from drive_server.runrecords import write_text
     from models.networks.runfiles import RunRecord
     from models.onnxfiles.model_card import CardSource, card, read_model_file
     from models.training.recipe import bundled_recipes, save_run_recipe
+    from protocol.runrecords import write_text
 
     record = RunRecord.load(a.run_dir)
     model = a.model or record.model_path

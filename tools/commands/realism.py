@@ -8,8 +8,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drive_server.runrecords import code_version, write_json
 from protocol.errors import BadValue
+from protocol.runrecords import code_version, write_json
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
 
             print(f"monitor plot {plot_run(driver, result, args.monitor_plot)}")
     if args.json:
-        from drive_server.runrecords import write_json
+        from protocol.runrecords import write_json
 
         write_json(args.json, result.to_dict())
         print(f"json  {args.json}")

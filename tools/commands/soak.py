@@ -12,8 +12,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from drive_server.runrecords import code_version, file_sha256, write_json
 from protocol.errors import BadValue
+from protocol.runrecords import code_version, file_sha256, write_json
 from tools.bench.fuzz_campaign import DEFAULT_LOG
 from tools.bench.soak import SoakConfig, check_recording
 from tools.wire.frames import log_frames, synthetic_frames

@@ -33,10 +33,10 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import code_version, file_sha256, read_json, write_json, write_text
 from models.networks.runfiles import EpochRow, RunPaths, RunRecord
 from protocol.codeversion import ROOT, code_digest
 from protocol.errors import BadValue
+from protocol.runrecords import code_version, file_sha256, read_json, write_json, write_text
 from tools.dagger.config import DaggerConfig
 from tools.dagger.rollout import SUMMARY, CollectionStats, collect_round, read_stats
 from tools.sim.driving.rules import TARGET_ETA

@@ -11,8 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import code_version, read_json, write_json, write_text
 from protocol.errors import BadValue
+from protocol.runrecords import code_version, read_json, write_json, write_text
 from tools.dagger.config import DaggerConfig
 from tools.dagger.loop import SUMMARY_JSON
 from tools.sim.driving.rules import TARGET_ETA

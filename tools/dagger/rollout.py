@@ -29,11 +29,11 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from drive_server.control import ControlLaw
-from drive_server.runrecords import write_json
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name
 from protocol.errors import BadValue
 from protocol.facts import CAMERAS
 from protocol.rigfile import write_rig
+from protocol.runrecords import write_json
 from protocol.units import from_kmh
 from tools.dagger.config import STREAM_EPISODES, STREAM_MIX, DaggerConfig
 from tools.sim.collect.dataset import EPOCH
@@ -182,7 +182,7 @@ def _write_frames(folder: Path, cameras: tuple[str, ...], when: dt.datetime, obs
 
 def read_stats(folder: Path) -> CollectionStats:
     """The statistics a finished collection wrote beside its frames."""
-    from drive_server.runrecords import read_json
+    from protocol.runrecords import read_json
 
     data = read_json(folder / SUMMARY)
     known = {k: v for k, v in data.items() if k in CollectionStats.__dataclass_fields__ and k != "world_seeds"}

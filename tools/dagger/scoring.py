@@ -17,7 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import file_sha256, read_json, write_json, write_text
+from protocol.runrecords import file_sha256, read_json, write_json, write_text
 from tools.dagger.config import PERTURBATIONS, DaggerConfig
 from tools.evaluate.experiments import is_autonomous, run_eta
 from tools.evaluate.journal import run_code

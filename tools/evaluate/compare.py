@@ -13,8 +13,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import file_sha256
 from models.networks.runfiles import HISTORY, RunPaths, RunRecord, read_history
+from protocol.runrecords import file_sha256
 from tools.errors import CommandError
 from tools.evaluate.evalrecord import EvalRecord
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, experiment

@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import read_json, write_json
 from protocol.errors import BadValue, UserError
+from protocol.runrecords import read_json, write_json
 
 RESULTS = "results.json"
 

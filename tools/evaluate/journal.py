@@ -11,8 +11,8 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.runrecords import read_json, write_json, write_text
 from protocol.codeversion import ROOT, code_digest
+from protocol.runrecords import read_json, write_json, write_text
 from tools.errors import CommandError
 from tools.evaluate.runner import DriverSpec, read_journal, spec_dict
 

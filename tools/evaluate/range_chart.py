@@ -11,7 +11,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import atomic_path
+from protocol.runrecords import atomic_path
 from tools.evaluate.experiments import EXPERIMENTS
 from tools.evaluate.paper import PAPER_TABLE10_RANGES
 

@@ -13,8 +13,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import file_sha256, read_json
 from protocol.errors import BadValue
+from protocol.runrecords import file_sha256, read_json
 from tools.evaluate.experiments import experiment, is_autonomous, run_eta
 from tools.sim.track.files import track_text, write_track_file
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, generate_world, world_seed_range

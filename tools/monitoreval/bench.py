@@ -8,8 +8,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import code_version, write_json, write_text
 from protocol.errors import BadValue
+from protocol.runrecords import code_version, write_json, write_text
 from tools.monitoreval.runset import RunSpec, failing_runs, nominal_runs
 from tools.monitoreval.scoring import ScoringRules
 

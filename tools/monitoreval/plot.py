@@ -18,7 +18,7 @@ def plot_run(driver: Any, result: Any, path: Path, title: str = "", rules: Scori
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from drive_server.runrecords import atomic_path
+    from protocol.runrecords import atomic_path
 
     spec = driver.monitor.state.spec
     t = np.array([w for w, _ in driver.readings])

@@ -38,7 +38,7 @@ def degraded_model(src: Path, folder: Path, sigma: float, seed: int = 0) -> Path
     import onnx
     from onnx import numpy_helper
 
-    from drive_server.runrecords import atomic_path
+    from protocol.runrecords import atomic_path
 
     dst = Path(folder) / f"{Path(src).stem}-noise{sigma:g}-s{seed}-{file_digest(src)}.onnx"
     if dst.is_file():

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from drive_server.runrecords import atomic_path
+from protocol.runrecords import atomic_path
 from tools.sim.driving.rules import TARGET_ETA
 
 TRACKS = ("lake", "mountain", "jungle")

@@ -19,10 +19,10 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from drive_server.runrecords import write_json
 from models.networks.runfiles import RunPaths, RunRecord
 from protocol.codeversion import ROOT, code_digest, data_digest
 from protocol.errors import UserError
+from protocol.runrecords import write_json
 from tools.realdata.recordings import PublicRecording
 
 if TYPE_CHECKING:

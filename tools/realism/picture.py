@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drive_server.runrecords import atomic_path
+from protocol.runrecords import atomic_path
 from tools.realism.stats import Gap
 
 #: Statistics drawn as histograms (the ones a look change moves most).

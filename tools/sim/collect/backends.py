@@ -21,8 +21,8 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
-from drive_server.runrecords import file_sha256, write_bytes
 from protocol.errors import BadValue
+from protocol.runrecords import file_sha256, write_bytes
 from tools.ray_support import BACKENDS
 from tools.sim.collect.dataset import CollectConfig, collect
 from tools.sim.worldgen import WorldGenConfig, write_world

@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drive_server.runrecords import atomic_path, read_json, write_json, write_text
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME
 from protocol.errors import BadValue
 from protocol.rigfile import write_rig
+from protocol.runrecords import atomic_path, read_json, write_json, write_text
 from tools.sim.collect.backends import WORLD_TIME_SLOT, WorldJob, WorldOutcome, run_jobs
 from tools.sim.collect.dataset import EPOCH, CollectConfig, OutputDirError
 from tools.sim.worldgen import GENERATOR_VERSION, WorldGenConfig, seed_range_of, world_seed_range

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from drive_server.runrecords import write_text
+from protocol.runrecords import write_text
 from tools.sim.track.geometry import closest_overlap
 from tools.sim.track.reader import Reader
 from tools.sim.track.road import (

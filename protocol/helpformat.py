@@ -1,4 +1,7 @@
-"""The help format of every command line of the project: each flag's help ends with its default."""
+"""The help format of every command line of the project: each flag's help ends with its default.
+
+In protocol, the bottom layer, because both drive_server's command line and ``rbc`` (tools) use it (stdlib only).
+"""
 
 from __future__ import annotations
 

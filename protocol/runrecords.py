@@ -1,7 +1,8 @@
 """Run records for every package: atomic file writes, the code version and file hashes.
 
 Why here: deployment code (the server's stats) writes results too, and must not import the
-training package, so the one writer lives at the bottom that everyone may import (stdlib only).
+training package, so the one writer lives at the bottom (protocol) that every package may import
+(stdlib only).
 Every file is written to a temporary name and renamed, so a crash or Ctrl-C never leaves half a
 file behind, and every file gets the same mode (0666 minus the umask, like ``open``).
 """
