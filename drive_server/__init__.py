@@ -1,5 +1,6 @@
 """Deployment runtime: Socket.IO drive server, ONNX Runtime inference, coupled control law.
 
-Depends only on the design card's packages (never on torch). ``contract`` and ``preprocess`` are
-also imported by the training pipeline so training and serving can never drift apart.
+Depends only on the design card's packages (never on torch). The serving contract (``contract``,
+``preprocess``, ``smoothing``, ``monitor``, ``model``) is also imported by ``models`` (tests/test_layout.py), so
+training and serving can never drift apart.
 """
