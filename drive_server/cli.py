@@ -11,7 +11,7 @@ import logging
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import cv2
 
@@ -27,6 +27,9 @@ from drive_server.server_config import ServerConfig
 from protocol import SpeedUnit
 from protocol.errors import BadValue, UserError
 from protocol.helpformat import DefaultsHelpFormatter
+
+if TYPE_CHECKING:
+    import socket
 
 log = logging.getLogger("drive_server")
 
@@ -108,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _dashboard_wanted(args: argparse.Namespace, sock: Any) -> bool:
+def _dashboard_wanted(args: argparse.Namespace, sock: socket.socket) -> bool:
     """On by default on localhost only; one process's view of its own clients, so not with --workers."""
     wanted = listen.is_local(sock.getsockname()[0]) if args.dashboard is None else args.dashboard
     if wanted and args.workers > 1:

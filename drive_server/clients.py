@@ -5,13 +5,19 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drive_server.connections import unsent_bytes
 from drive_server.guard import FrameGuard
 from drive_server.limits import MAX_UNSENT_BYTES
 from drive_server.server_config import RETIRED
 from drive_server.stats import LatencyStats
+
+if TYPE_CHECKING:
+    from drive_server.connections import TcpSocket
+    from drive_server.dashboard import LiveFrame
+    from drive_server.monitor import ClientMonitor
+    from drive_server.smoothing import SteeringSmoother
 
 #: Disconnected clients whose statistics are kept individually (older ones only add to the counters).
 MAX_FINISHED_CLIENTS = 64
@@ -27,14 +33,14 @@ class ClientState:
     user_agent: str
     stats: LatencyStats
     guard: FrameGuard
-    socket: Any = None  # the WebSocket's TCP socket (None for long-polling)
+    socket: TcpSocket | None = None  # the WebSocket's TCP socket (None for long-polling)
     replies: int = 0
     unsent: int = 0
-    live: Any = None  # the latest answered frame, for the live view (a drive_server.dashboard.LiveFrame)
-    smoother: Any = None  # this client's steering smoothing (a drive_server.smoothing.SteeringSmoother; None: off)
-    monitor: Any = None  # this client's misbehaviour monitor (a drive_server.monitor.ClientMonitor; None: off)
+    live: LiveFrame | None = None  # the latest answered frame, for the live view
+    smoother: SteeringSmoother | None = None  # this client's steering smoothing (None: off)
+    monitor: ClientMonitor | None = None  # this client's misbehaviour monitor (None: off)
 
-    def not_reading(self, session: Any, max_pending: int) -> bool:
+    def not_reading(self, session: Any, max_pending: int) -> bool:  # an engineio.Socket (untyped package: Any)
         """Replies pile up in engine.io's queue, or (checked every 32 replies: one ioctl) in the kernel."""
         if session.queue.qsize() >= max_pending:
             return True

@@ -15,7 +15,7 @@ import struct
 import sys
 from collections import OrderedDict
 from time import monotonic
-from typing import Any
+from typing import Protocol
 
 from drive_server.limits import FaultLog, WireLimits
 
@@ -28,6 +28,16 @@ else:  # pragma: no cover
     _TIOCOUTQ = None
 
 
+class TcpSocket(Protocol):
+    """What is done here to a client's TCP socket (eventlet's ``GreenSocket`` or a plain ``socket.socket``)."""
+
+    def fileno(self) -> int: ...
+
+    def setsockopt(self, level: int, option: int, value: bytes, /) -> None: ...
+
+    def shutdown(self, how: int, /) -> None: ...
+
+
 class ConnectionLimiter:
     """Counts the open connections and remembers which are still sending their headers and when each
     upgraded WebSocket last sent something."""
@@ -36,8 +46,8 @@ class ConnectionLimiter:
         self.limits = limits
         self.faults = faults
         self.open = 0
-        self.waiting: OrderedDict[int, Any] = OrderedDict()  # id(protocol) -> socket, oldest first
-        self.upgraded: dict[int, tuple[Any, list[float]]] = {}  # id(websocket) -> (socket, [last message time])
+        self.waiting: OrderedDict[int, TcpSocket] = OrderedDict()  # id(protocol) -> socket, oldest first
+        self.upgraded: dict[int, tuple[TcpSocket, list[float]]] = {}  # id(websocket) -> (socket, [last message time])
         self.ended = 0  # connections ended so far (the server collects their garbage when it is quiet)
 
     def admit(self, peer: str) -> bool:
@@ -45,6 +55,7 @@ class ConnectionLimiter:
         headers is closed to make room, else the WebSocket silent longest if it has been silent for
         ``idle_evict_s`` (its own greenthread then ends and gives its slot back)."""
         if self.open >= self.limits.max_connections:
+            sock: TcpSocket | None
             if self.waiting:
                 _, sock = self.waiting.popitem(last=False)
                 self.faults.report("evicted", "connection limit (%d) reached: closed the oldest connection still "
@@ -61,7 +72,7 @@ class ConnectionLimiter:
         self.open += 1
         return True
 
-    def _idlest(self) -> tuple[Any, float]:
+    def _idlest(self) -> tuple[TcpSocket | None, float]:
         """The socket of the WebSocket silent longest, if past ``idle_evict_s`` (else None), and its silence."""
         if not self.upgraded:
             return None, 0.0
@@ -80,8 +91,8 @@ def protocol_class(limiter: ConnectionLimiter) -> type:
 
     limits, faults = limiter.limits, limiter.faults
 
-    class LimitedProtocol(eventlet.wsgi.HttpProtocol):
-        _timer: Any = None
+    class LimitedProtocol(eventlet.wsgi.HttpProtocol):  # type: ignore[misc]  # eventlet has no stubs: its classes are Any
+        _timer: eventlet.Timeout | None = None
 
         def handle(self) -> None:
             address = self.client_address
@@ -130,18 +141,19 @@ def protocol_class(limiter: ConnectionLimiter) -> type:
     return LimitedProtocol
 
 
-def unsent_bytes(sock: Any) -> int:
+def unsent_bytes(sock: TcpSocket) -> int:
     """Bytes queued in the kernel for ``sock`` and not yet sent or acknowledged (Linux ``SIOCOUTQ``; 0 where
     the platform cannot tell, which leaves the pending-reply queue as the only signal)."""
     if _TIOCOUTQ is None:
         return 0
     try:
-        return struct.unpack("i", fcntl.ioctl(sock.fileno(), _TIOCOUTQ, b"\0\0\0\0"))[0]
+        queued: int = struct.unpack("i", fcntl.ioctl(sock.fileno(), _TIOCOUTQ, b"\0\0\0\0"))[0]
     except (OSError, ValueError):
         return 0
+    return queued
 
 
-def shutdown_socket(sock: Any, reset: bool = False) -> None:
+def shutdown_socket(sock: TcpSocket, reset: bool = False) -> None:
     """Close a connection at once, both ways; its blocked reader sees EOF and its writer an error.
 
     ``reset`` (a client that does not read its replies): ``SO_LINGER`` 0 makes the final close send a

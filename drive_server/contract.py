@@ -151,7 +151,7 @@ NVIDIA_CONTRACT = PreprocessContract(width=200, height=66, crop_top=60, crop_bot
                                      scale=1.0 / 255.0, offset=0.0)
 
 
-def infer_contract(input_shape: tuple[Any, ...]) -> PreprocessContract:
+def infer_contract(input_shape: tuple[int | str | None, ...]) -> PreprocessContract:
     """Guess the contract of a model without metadata from its input shape (paper defaults)."""
     if len(input_shape) != 4:
         raise ContractError(f"model input must have rank 4 (N,H,W,C or N,C,H,W), got shape {list(input_shape)}")

@@ -16,10 +16,15 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from importlib import resources
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    from wsgiref.types import StartResponse, WSGIEnvironment
+
+    from drive_server.monitor import MonitorReading
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +47,19 @@ class LiveFrame:
     throttle: float  # the command sent, -1..1 (< 0 brakes)
     speed: float  # the telemetry speed, in the server's telemetry unit
     fallback: bool  # the command came from the fallback policy (held or stopped), not the model
-    monitor: Any = None  # the monitor's reading of this frame (a drive_server.monitor.MonitorReading), if any
+    monitor: MonitorReading | None = None  # the monitor's reading of this frame, if any
+
+
+class ViewerQueue(Protocol):
+    """One viewer's bounded queue of snapshots (JSON bytes; None ends its stream): eventlet's ``LightQueue``."""
+
+    def get(self) -> bytes | None: ...
+
+    def get_nowait(self) -> bytes | None: ...
+
+    def put_nowait(self, item: bytes | None) -> None: ...
+
+    def full(self) -> bool: ...
 
 
 @dataclass(frozen=True)
@@ -57,12 +74,12 @@ class Dashboard:
     """Serves the page and pushes snapshots; ``snapshot()`` is the server's view of its clients."""
 
     def __init__(self, snapshot: Callable[[bool], dict[str, Any]], sleep: Callable[[float], None],
-                 spawn: Callable[..., Any], make_queue: Callable[[int], Any],
+                 spawn: Callable[[Callable[[], None]], object], make_queue: Callable[[int], ViewerQueue],
                  config: DashboardConfig = DashboardConfig()) -> None:
         self._snapshot, self._sleep, self._spawn, self._make_queue = snapshot, sleep, spawn, make_queue
         self.config = config
-        self._viewers: list[Any] = []
-        self._ticker: Any = None
+        self._viewers: list[ViewerQueue] = []
+        self._ticker: object = None  # the ticker's greenthread while it runs
         self.dropped = 0  # viewers dropped for not keeping up
         self.served = 0  # viewers connected so far
         self._files = {path: (resources.files("drive_server").joinpath("static", name).read_bytes(), kind)
@@ -73,7 +90,7 @@ class Dashboard:
         return len(self._viewers)
 
     # -- WSGI ------------------------------------------------------------------------------------
-    def wsgi(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Any:
+    def wsgi(self, environ: WSGIEnvironment, start_response: StartResponse) -> Iterable[bytes]:
         """Everything that is not ``/socket.io/``: the page, its files, the event stream; else 404/405."""
         path = environ.get("PATH_INFO", "/")
         if environ.get("REQUEST_METHOD", "GET") not in ("GET", "HEAD"):
@@ -89,14 +106,14 @@ class Dashboard:
         return self._plain(start_response, "404 Not Found", "not found: the dashboard is at /\n")
 
     @staticmethod
-    def _plain(start_response: Callable[..., Any], status: str, text: str,
+    def _plain(start_response: StartResponse, status: str, text: str,
                headers: list[tuple[str, str]] | None = None) -> list[bytes]:
         body = text.encode()
         start_response(status, [("Content-Type", "text/plain; charset=utf-8"), ("Content-Length", str(len(body))),
                                 *(headers or [])])
         return [body]
 
-    def _events(self, start_response: Callable[..., Any]) -> Any:
+    def _events(self, start_response: StartResponse) -> Iterable[bytes]:
         if len(self._viewers) >= self.config.max_viewers:
             return self._plain(start_response, "503 Service Unavailable",
                                f"{self.config.max_viewers} viewers already watch this server\n")
@@ -110,7 +127,7 @@ class Dashboard:
                                   ("X-Accel-Buffering", "no")])
         return self._stream(queue)
 
-    def _stream(self, queue: Any) -> Iterator[bytes]:
+    def _stream(self, queue: ViewerQueue) -> Iterator[bytes]:
         try:
             yield b"retry: 1000\n\n"
             while True:
@@ -121,7 +138,7 @@ class Dashboard:
         finally:
             self._forget(queue)
 
-    def _forget(self, queue: Any) -> None:
+    def _forget(self, queue: ViewerQueue) -> None:
         if queue in self._viewers:
             self._viewers.remove(queue)
 
@@ -147,7 +164,7 @@ class Dashboard:
             self._ticker = None
 
 
-def _offer_end(queue: Any) -> None:
+def _offer_end(queue: ViewerQueue) -> None:
     """Tell a dropped viewer's stream to end, if there is room (a stuck one is ended by its socket)."""
     try:
         queue.get_nowait()  # make room: the pending snapshot is of no use any more

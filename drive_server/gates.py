@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from time import monotonic
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs
@@ -26,6 +26,8 @@ from drive_server.limits import (
 from drive_server.patches import eventlet_engineio as wire
 
 if TYPE_CHECKING:
+    from wsgiref.types import StartResponse, WSGIApplication, WSGIEnvironment
+
     from drive_server.connections import ConnectionLimiter
 
 log = logging.getLogger(__name__)
@@ -40,7 +42,7 @@ def limited_message_class(base: type, limit: int, on_too_large: Callable[[int], 
     """
     from eventlet.websocket import FailedConnectionError
 
-    class LimitedMessage(base):  # type: ignore[misc, valid-type]
+    class LimitedMessage(base):  # type: ignore[misc]
         size = 0
 
         def push(self, data: bytes, final: bool = False) -> None:
@@ -64,11 +66,11 @@ def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str, he
 
     stock_wait = ws.wait
 
-    def wait() -> Any:
+    def wait() -> str | bytes | None:
         # one message per connection per turn of the event loop: a client whose socket always has data
         # (a flood) must not keep the loop from the other clients' readers and writers
         eventlet.sleep(0)
-        data = stock_wait()
+        data: str | bytes | None = stock_wait()  # eventlet's RFC6455WebSocket.wait (no stubs: Any)
         if data is None:
             return None
         heard[0] = monotonic()
@@ -90,7 +92,7 @@ def limited_websocket_class(base: type, limiter: ConnectionLimiter) -> type:
     if not ok:
         log.warning("WebSocket messages bounded only after reassembly (%s)", why)
 
-    def on_upgrade(environ: dict[str, Any], ws: Any) -> None:
+    def on_upgrade(environ: WSGIEnvironment, ws: Any) -> None:
         peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
         heard = [monotonic()]  # the upgrade counts as hearing from it
         limiter.upgraded[id(ws)] = (ws.socket, heard)
@@ -98,7 +100,7 @@ def limited_websocket_class(base: type, limiter: ConnectionLimiter) -> type:
             guard_websocket(ws, limits, faults, peer, heard)
         environ["rbc.websocket"] = ws  # lets the server close this connection with a close frame
 
-    def on_end(environ: dict[str, Any]) -> None:
+    def on_end(environ: WSGIEnvironment) -> None:
         ws = environ.get("rbc.websocket")
         if ws is not None:
             limiter.upgraded.pop(id(ws), None)
@@ -106,7 +108,7 @@ def limited_websocket_class(base: type, limiter: ConnectionLimiter) -> type:
     return wire.hooked_websocket_class(base, "LimitedWebSocketWSGI", on_upgrade=on_upgrade, on_end=on_end)
 
 
-def _raw_response(environ: dict[str, Any], status: str, body: bytes) -> list[bytes]:
+def _raw_response(environ: WSGIEnvironment, status: str, body: bytes) -> list[bytes]:
     """Write a complete response with ``Connection: close`` directly and tell eventlet it is handled.
 
     Why not ``start_response``: after a normal response eventlet reads and discards the unread request
@@ -123,7 +125,7 @@ def _raw_response(environ: dict[str, Any], status: str, body: bytes) -> list[byt
     return []
 
 
-def polling_gate(app: Callable, eio_server: Any, limits: WireLimits, faults: FaultLog) -> Callable:
+def polling_gate(app: WSGIApplication, eio_server: Any, limits: WireLimits, faults: FaultLog) -> WSGIApplication:
     """WSGI middleware: refuse an Engine.IO long-polling POST before engine.io reads it.
 
     Oversized (from Content-Length alone) -> 413, chunked -> 411, body not sent within the header
@@ -133,13 +135,13 @@ def polling_gate(app: Callable, eio_server: Any, limits: WireLimits, faults: Fau
 
     import eventlet
 
-    def close_session(environ: dict[str, Any]) -> None:
+    def close_session(environ: WSGIEnvironment) -> None:
         sid = parse_qs(environ.get("QUERY_STRING", "")).get("sid", [None])[0]
         session = eio_server.sockets.get(sid) if sid else None
         if session is not None and not session.closed:
             session.close(wait=False, abort=False)  # wait=True would wait for a poll that may never come
 
-    def gate(environ: dict[str, Any], start_response: Callable) -> Any:
+    def gate(environ: WSGIEnvironment, start_response: StartResponse) -> Iterable[bytes]:
         if environ.get("REQUEST_METHOD") != "POST" or "eventlet.input" not in environ:
             return app(environ, start_response)
         peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"

@@ -33,7 +33,6 @@ import logging
 import re
 from dataclasses import dataclass
 from time import monotonic
-from typing import Any
 
 from drive_server.stats import FaultCounters
 from protocol.errors import BadValue
@@ -109,7 +108,7 @@ class FaultLog:
         self._used: dict[str, int] = {}  # lines written in it
         self._suppressed: dict[str, int] = {}
 
-    def report(self, kind: str, message: str, *args: Any, count: bool = True) -> None:
+    def report(self, kind: str, message: str, *args: object, count: bool = True) -> None:
         """Log ``message % args`` unless ``burst`` lines of this kind were written in the current
         interval; ``count=False`` for faults counted elsewhere (per client)."""
         if count and self.counters is not None:

@@ -16,13 +16,15 @@ from protocol.errors import UserError
 
 #: Pending connections the kernel queues before ``accept``.
 BACKLOG = 128
+#: A socket address as ``getaddrinfo`` gives it: (host, port) for IPv4, (host, port, flowinfo, scope) for IPv6.
+_Address = tuple[str, int] | tuple[str, int, int, int] | tuple[int, bytes]
 
 
 class ListenError(UserError, OSError):
     """The socket cannot be opened; the message is one line meant for the user (and says what to do)."""
 
 
-def _family_and_address(host: str, port: int) -> tuple[socket.AddressFamily, tuple]:
+def _family_and_address(host: str, port: int) -> tuple[socket.AddressFamily, _Address]:
     try:
         infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
     except socket.gaierror as exc:

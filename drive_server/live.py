@@ -4,14 +4,32 @@ counters and recent latency, built from data the server keeps anyway (nothing is
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from drive_server.dashboard import RECENT_FRAMES
 from drive_server.stats import STAGES, summarize
 from protocol.units import to_kmh
 
+if TYPE_CHECKING:
+    from drive_server.clients import ClientState
+    from drive_server.dashboard import Dashboard
+    from drive_server.pipeline import DriveConfig, DrivePipeline
 
-def server_view(server: Any) -> dict[str, Any]:
+
+class Served(Protocol):
+    """What the live view reads of a ``DriveServer`` (named so, not imported: the server imports this module)."""
+
+    @property
+    def pipeline(self) -> DrivePipeline: ...
+
+    @property
+    def clients(self) -> dict[str, ClientState]: ...
+
+    @property
+    def dashboard(self) -> Dashboard | None: ...
+
+
+def server_view(server: Served) -> dict[str, Any]:
     """The model, its input contract and the control law's parameters."""
     pipeline = server.pipeline
     cfg = pipeline.config
@@ -25,7 +43,7 @@ def server_view(server: Any) -> dict[str, Any]:
     }
 
 
-def _monitor_view(pipeline: Any) -> dict[str, Any] | None:
+def _monitor_view(pipeline: DrivePipeline) -> dict[str, Any] | None:
     spec = pipeline.monitor_spec
     if spec is None:
         return None
@@ -33,7 +51,7 @@ def _monitor_view(pipeline: Any) -> dict[str, Any] | None:
             "mode": pipeline.config.monitor.mode.value}
 
 
-def client_view(client: Any, cfg: Any, with_latency: bool, now: float) -> dict[str, Any]:
+def client_view(client: ClientState, cfg: DriveConfig, with_latency: bool, now: float) -> dict[str, Any]:
     """One simulator's panel: latest frame (the JPEG as it was sent), counters, recent latency."""
     stats, guard = client.stats, client.guard
     entry: dict[str, Any] = {
@@ -65,7 +83,7 @@ def client_view(client: Any, cfg: Any, with_latency: bool, now: float) -> dict[s
     return entry
 
 
-def snapshot(server: Any, with_latency: bool) -> dict[str, Any]:
+def snapshot(server: Served, with_latency: bool) -> dict[str, Any]:
     """One push to every viewer (``with_latency``: percentiles too, a few times a second)."""
     now = time.perf_counter()
     cfg = server.pipeline.config
@@ -73,7 +91,7 @@ def snapshot(server: Any, with_latency: bool) -> dict[str, Any]:
             "clients": [client_view(c, cfg, with_latency, now) for c in list(server.clients.values())]}
 
 
-def make_dashboard(server: Any) -> Any:
+def make_dashboard(server: Served) -> Dashboard:
     """The live view of ``server`` on eventlet: its ticker and viewer queues are greenthread primitives."""
     import eventlet
     import eventlet.queue

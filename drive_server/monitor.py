@@ -20,6 +20,7 @@ import json
 import logging
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from enum import IntEnum, StrEnum
 from time import perf_counter
@@ -270,7 +271,8 @@ class ClientMonitor:
                     f" for client {self.who}" if self.who else "", why)
 
 
-def act_on(level: Level, throttle_at: Any, steering_deg: float, speed_kmh: float, policy: MonitorPolicy) -> float:
+def act_on(level: Level, throttle_at: Callable[[float, float, float], float], steering_deg: float, speed_kmh: float,
+           policy: MonitorPolicy) -> float:
     """The throttle (-1..1, < 0 brakes) of ``act`` for a state: the control law as is when normal, at a lowered
     speed limit on a warning, full brake while moving on an alarm (0 once stopped: the car waits)."""
     if level == Level.ALARM:

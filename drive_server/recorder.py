@@ -23,10 +23,13 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TextIO
 
 from protocol import SteerCommand
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name, last_row_stamp
+
+if TYPE_CHECKING:
+    from drive_server.monitor import MonitorReading
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +48,10 @@ BATCH_S = 0.05
 WRITER_NICE = 19
 
 
+#: One queued frame: (time.time(), its JPEG in base64, steering, throttle, speed, the monitor's reading or None).
+_Frame = tuple[float, str, float, float, float, "MonitorReading | None"]
+
+
 @dataclass
 class RecorderCounts:
     received: int = 0  # frames handed to the recorder
@@ -60,11 +67,11 @@ class Recorder:
         self.folder = Path(folder)
         self.counts = RecorderCounts()
         self.error: str | None = None
-        self._queue: queue.Queue = queue.Queue(maxsize=max(1, queue_frames))
+        self._queue: queue.Queue[_Frame | None] = queue.Queue(maxsize=max(1, queue_frames))
         self._last_warning = -float("inf")
         self._writer: LogWriter | None = None
         self._last_ms = 0
-        self._monitor_log: Any = None  # opened on the first frame with a monitor reading
+        self._monitor_log: TextIO | None = None  # opened on the first frame with a monitor reading
         try:
             (self.folder / IMAGE_DIR).mkdir(parents=True, exist_ok=True)
             self._images = (self.folder / IMAGE_DIR).resolve()
@@ -82,9 +89,10 @@ class Recorder:
         log.info("recording every answered frame to %s", self.folder / LOG_NAME)
 
     # -- the drive loop's side -----------------------------------------------------------------------
-    def record(self, image_b64: str, command: SteerCommand, speed: float, monitor: Any = None) -> None:
+    def record(self, image_b64: str, command: SteerCommand, speed: float,
+               monitor: MonitorReading | None = None) -> None:
         """Queue one answered frame (called in the Socket.IO handler, after the reply went out); ``monitor``: the
-        monitor's reading of it (a drive_server.monitor.MonitorReading), if one scored it."""
+        monitor's reading of it, if one scored it."""
         self.counts.received += 1
         if self._thread is None:
             self.counts.failed += 1
@@ -111,7 +119,7 @@ class Recorder:
                 self._warn(exc)
 
     def _write(self, when: float, image_b64: str, steering: float, throttle: float, speed: float,
-               monitor: Any = None) -> None:
+               monitor: MonitorReading | None = None) -> None:
         ms = max(int(when * 1000), self._last_ms + 1)  # unique, increasing names even at 1,000 frames/s
         self._last_ms = ms
         name = frame_name("center", dt.datetime.fromtimestamp(ms / 1000))

@@ -15,7 +15,7 @@ import signal
 import warnings
 from dataclasses import replace
 from time import perf_counter
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drive_server import listen, patches
 from drive_server.connections import ConnectionLimiter, protocol_class, shutdown_socket
@@ -32,6 +32,12 @@ from drive_server.stats import FaultCounters, LatencyStats, save_stats, summariz
 from drive_server.transport import install
 from protocol import ProtocolError, encode_steer, parse_telemetry
 from protocol.runrecords import write_json
+
+if TYPE_CHECKING:
+    import socket
+    from wsgiref.types import WSGIEnvironment
+
+    from drive_server.recorder import Recorder
 
 warnings.filterwarnings("ignore", message=r"\s*Eventlet is deprecated")  # printed on import; says nothing to users
 import eventlet  # noqa: E402
@@ -88,9 +94,9 @@ class DriveServer:
         self.history = ClientHistory()
         self._logged_upto: dict[str, int] = {}
         self._stop = False
-        self._sock: Any = None
+        self._sock: eventlet.greenio.GreenSocket | None = None  # eventlet has no stubs: Any to mypy
         self._logged_frames = -1
-        self.recorder: Any = None  # a drive_server.recorder.Recorder with --record: gets every answered frame
+        self.recorder: Recorder | None = None  # with --record: gets every answered frame
         self.sio.on("connect", self._on_connect)
         self.sio.on("disconnect", self._on_disconnect)
         self.sio.on("telemetry", self._on_telemetry)
@@ -99,14 +105,14 @@ class DriveServer:
         self.app = polling_gate(socketio.WSGIApp(self.sio, wsgi_app=pages), eio, self.limits, self.fault_log)
 
     # -- events ----------------------------------------------------------------------------------
-    def _on_connect(self, sid: str, environ: dict[str, Any], auth: Any = None) -> None:
+    def _on_connect(self, sid: str, environ: WSGIEnvironment, auth: object = None) -> None:
         agent = environ.get("HTTP_USER_AGENT", "?")
         peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
         self.clients[sid] = self._new_client(sid, agent)
         self.session_log.report("connect", "client %s connected from %s (%s); %d connected", sid, peer, agent,
                                 len(self.clients))
 
-    def _on_disconnect(self, sid: str, reason: Any = None) -> None:
+    def _on_disconnect(self, sid: str, reason: object = None) -> None:
         client = self.clients.pop(sid, None)
         if client is not None:
             for name in self.history.add(client.stats):
@@ -149,7 +155,7 @@ class DriveServer:
         else:
             self.sio.eio.send(client.eio_sid, '2["' + event + '",' + json.dumps(payload, separators=(",", ":")) + "]")
 
-    def _on_telemetry(self, sid: str, payload: Any = None, *_: Any) -> None:
+    def _on_telemetry(self, sid: str, payload: object = None, *_: object) -> None:
         # no payload at all is manual mode too: python-socketio's ``emit("telemetry", None)`` sends that
         t0 = perf_counter()
         client = self._client(sid)
@@ -254,7 +260,7 @@ class DriveServer:
                 log.info("%d client(s): %s", len(self.clients), line)
 
     # -- running ---------------------------------------------------------------------------------
-    def stop(self, *_: Any) -> None:
+    def stop(self, *_: object) -> None:
         """Ask ``serve`` to return (safe from a signal handler)."""
         self._stop = True
 
@@ -262,9 +268,10 @@ class DriveServer:
         """Open the listening socket (raises ``ListenError`` with a one-line message if the port is taken,
         out of range or the address unusable); returns (host, port)."""
         self._sock = eventlet.greenio.GreenSocket(listen.listening_socket(self.config.host, self.config.port))
-        return self._sock.getsockname()[:2]
+        address: tuple[str, int] = self._sock.getsockname()[:2]
+        return address
 
-    def adopt(self, sock: Any) -> None:
+    def adopt(self, sock: socket.socket) -> None:
         """Serve on a listening socket opened by someone else (a worker process's parent)."""
         self._sock = eventlet.greenio.GreenSocket(sock)
 
@@ -273,6 +280,7 @@ class DriveServer:
         if self._sock is None:
             self.bind()
         sock = self._sock
+        assert sock is not None  # bound above
         limiter = self.limiter
         server = eventlet.spawn(eventlet.wsgi.server, sock, self.app, log_output=False, debug=False,
                                 log=logging.getLogger("eventlet.wsgi"), protocol=protocol_class(limiter),

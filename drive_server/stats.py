@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -21,6 +21,18 @@ from protocol.runrecords import atomic_path
 STAGES = ("decode", "preprocess", "inference", "control", "total")
 RING_CAPACITY = 1 << 16
 _INITIAL_ROWS = 1024
+
+
+class StatsSummary(TypedDict):
+    """What :func:`summarize` reports (the ``total`` and per-client entries of ``--stats-json``)."""
+
+    frames: int
+    manual: int
+    malformed: int
+    bad_input: dict[str, int]  # ``malformed`` by kind of bad input
+    bad_output: int
+    sampled: int  # frames the percentiles are computed over
+    stages_ms: dict[str, dict[str, float]]  # stage -> p50, p90, p99, mean, max (empty without samples)
 
 
 class LatencyStats:
@@ -65,7 +77,7 @@ class LatencyStats:
         idx = np.arange(start, self.recorded) % len(self._ring)
         return self._ring[idx]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> StatsSummary:
         return summarize([self])
 
     @classmethod
@@ -110,8 +122,8 @@ def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
                      "bad_input": s.bad_input, "bad_output": s.bad_output})
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
     with atomic_path(path) as tmp, tmp.open("wb") as fh:  # a file object: np.savez would add ".npz" to a name
-        # numpy's stub reads **arrays as possibly naming its allow_pickle (a bool); the names are s0, s1, ..., meta
-        np.savez(fh, **arrays)  # type: ignore[arg-type]
+        # allow_pickle spelled out (numpy's default): else numpy's stub reads **arrays as possibly naming it
+        np.savez(fh, allow_pickle=True, **arrays)
 
 
 def load_stats(path: Path) -> list[LatencyStats]:
@@ -123,7 +135,7 @@ def load_stats(path: Path) -> list[LatencyStats]:
                 for i, m in enumerate(meta)]
 
 
-def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None) -> dict[str, Any]:
+def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None) -> StatsSummary:
     """Counters and per-stage percentiles (milliseconds) over one or several clients.
 
     ``since`` maps a client's name to the first frame to include in the percentiles (counters are
@@ -133,7 +145,7 @@ def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None
     since = since or {}
     samples = [s.samples(since.get(s.name, 0)) for s in stats]
     timings = np.concatenate(samples).astype(np.float64) if samples else np.zeros((0, len(STAGES)))
-    out: dict[str, Any] = {
+    out: StatsSummary = {
         "frames": sum(s.frames for s in stats),
         "manual": sum(s.manual for s in stats),
         "malformed": sum(s.malformed for s in stats),
@@ -161,7 +173,7 @@ def _sum_kinds(counts: Iterable[dict[str, int]]) -> dict[str, int]:
     return dict(sorted(total.items()))
 
 
-def summary_line(summary: dict[str, Any]) -> str:
+def summary_line(summary: StatsSummary) -> str:
     """One log line: counters, then p50/p99 in ms per stage, then the kinds of bad input and bad output."""
     head = f"frames {summary['frames']} manual {summary['manual']} malformed {summary['malformed']}"
     tail = ""

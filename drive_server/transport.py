@@ -23,10 +23,13 @@ import contextlib
 import logging
 import socket
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drive_server.patches import eventlet_engineio as wire
 from protocol.websocket import xor_mask
+
+if TYPE_CHECKING:
+    from wsgiref.types import WSGIEnvironment
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +47,7 @@ class TransportTuning:
         return cls(fast_unmask=False, tcp_nodelay=False, direct_reply=False)
 
 
-def fast_apply_mask(data: bytes, mask: Any, length: int | None = None, offset: int = 0) -> bytes:
+def fast_apply_mask(data: bytes, mask: bytes | bytearray, length: int | None = None, offset: int = 0) -> bytes:
     """Drop-in for eventlet's byte-by-byte unmask (same signature), vectorised."""
     return xor_mask(data, mask, length, offset)
 
@@ -57,12 +60,12 @@ def supported_eventlet(version: str | None = None) -> tuple[bool, str]:
 def tuned_websocket_class(base: type, tuning: TransportTuning) -> type:
     """A subclass of engine.io's eventlet ``WebSocketWSGI`` that applies ``tuning`` per connection."""
 
-    def on_request(environ: dict[str, Any]) -> None:
+    def on_request(environ: WSGIEnvironment) -> None:
         if tuning.tcp_nodelay and "eventlet.input" in environ:
             with contextlib.suppress(OSError, AttributeError):
                 environ["eventlet.input"].get_socket().setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
-    def on_upgrade(environ: dict[str, Any], ws: Any) -> None:
+    def on_upgrade(environ: WSGIEnvironment, ws: Any) -> None:  # eventlet's RFC6455WebSocket (no stubs)
         wire.use_unmask(ws, fast_apply_mask)
 
     return wire.hooked_websocket_class(base, "TunedWebSocketWSGI", on_request=on_request,

@@ -7,6 +7,7 @@ parses it (see :mod:`drive_server.limits`), and a telemetry too broken to decode
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 import socketio
@@ -17,7 +18,7 @@ from drive_server.patches import eventlet_engineio as wire
 log = logging.getLogger(__name__)
 
 
-class UnityCompatibleServer(socketio.Server):
+class UnityCompatibleServer(socketio.Server):  # type: ignore[misc]  # python-socketio has no stubs: Any
     """A ``socketio.Server`` that joins a client to ``/`` on its first event if it never sent ``40``.
 
     The join is silent (no CONNECT reply is sent, since the simulator does not expect one) and runs the
@@ -26,15 +27,15 @@ class UnityCompatibleServer(socketio.Server):
 
     #: Set by ``DriveServer``: answer a telemetry that cannot be decoded (sid, kind, reason), and close a
     #: connection after a protocol error (eio_sid, reason).
-    on_bad_telemetry: Any = None
-    on_protocol_error: Any = None
+    on_bad_telemetry: Callable[[str, str, str], None]
+    on_protocol_error: Callable[[str, str], None]
     manager_initialized: bool  # socketio.Server's own (the package is untyped)
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:  # socketio.Server's arguments
         super().__init__(*args, **kwargs)
         self.stock_message = wire.intercept_engine_messages(self, self.handle_message)
 
-    def handle_message(self, eio_sid: str, data: Any) -> None:
+    def handle_message(self, eio_sid: str, data: str | bytes) -> None:
         """Every engine.io message, before python-socketio's own handling (``stock_message``)."""
         session = self.eio.sockets.get(eio_sid)
         if session is None or session.closed or session.closing:
@@ -66,7 +67,7 @@ class UnityCompatibleServer(socketio.Server):
         if not self.manager_initialized:
             self.manager_initialized = True
             self.manager.initialize()
-        sid = self.manager.connect(eio_sid, "/")
+        sid: str = self.manager.connect(eio_sid, "/")
         log.info("client %s sent an event without a CONNECT packet (the Unity simulator does that): "
                  "joined it to '/'", sid)
         try:

@@ -26,11 +26,11 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 from drive_server import listen
 from drive_server.model import SteeringModel
-from drive_server.server import DriveServer, ServerConfig, stats_document
+from drive_server.server import DriveServer
+from drive_server.server_config import ServerConfig, stats_document
 from drive_server.stats import FaultCounters, load_stats, summarize, summary_line
 from drive_server.transport import TransportTuning
 from protocol.runrecords import write_json
@@ -77,7 +77,7 @@ def serve_workers(workers: int, sock: socket.socket, model: SteeringModel, confi
         pids[pid] = i
     stop = False
 
-    def request_stop(*_: Any) -> None:
+    def request_stop(*_: object) -> None:
         nonlocal stop
         stop = True
 

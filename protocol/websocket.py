@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 
-def xor_mask(data: bytes, mask: Any, length: int | None = None, offset: int = 0) -> bytes:
+def xor_mask(data: bytes, mask: bytes | bytearray, length: int | None = None, offset: int = 0) -> bytes:
     """XOR the first ``length`` bytes of ``data`` with the 4-byte WebSocket ``mask`` (section 5.3).
 
     ``offset`` is the mask position of ``data[0]`` (a frame may arrive in several recv chunks).

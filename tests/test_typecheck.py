@@ -1,10 +1,13 @@
-"""CI runs the type checker (mypy, pinned) between the linter and the tests; protocol is checked strictly."""
+"""CI runs the type checker (mypy, pinned) between the linter and the tests; protocol and drive_server strictly."""
 
 from __future__ import annotations
 
 import tomllib
 
 from helpers_server import REPO
+
+#: The packages checked strictly (the deployment code), the rest with mypy's defaults.
+STRICT_PACKAGES = ("protocol", "drive_server")
 
 #: What ``mypy --strict`` turns on that a per-module section can hold (warn_redundant_casts is global only).
 STRICT_FLAGS = {"disallow_any_generics", "disallow_subclassing_any", "disallow_untyped_calls", "disallow_untyped_defs",
@@ -27,11 +30,12 @@ def test_mypy_is_pinned_and_checks_every_package():
     assert set(_mypy()["files"]) == {"protocol", "drive_server", "models", "tools"}
 
 
-def test_protocol_is_strict_and_the_rest_is_not():
+def test_protocol_and_drive_server_are_strict_and_the_rest_is_not():
     """``strict = true`` in an override section turns --strict on for every module: the flags are spelled out."""
     config = _mypy()
     assert "strict" not in config and not any("strict" in o for o in config["overrides"])
-    (protocol,) = [o for o in config["overrides"] if "protocol" in o["module"]]
-    assert {flag for flag in STRICT_FLAGS if protocol.get(flag) is True} == STRICT_FLAGS
-    assert protocol["implicit_reexport"] is False and config["warn_redundant_casts"] is True
+    (strict,) = [o for o in config["overrides"] if STRICT_FLAGS & set(o)]
+    assert sorted(strict["module"]) == sorted(m for p in STRICT_PACKAGES for m in (p, f"{p}.*"))
+    assert {flag for flag in STRICT_FLAGS if strict.get(flag) is True} == STRICT_FLAGS
+    assert strict["implicit_reexport"] is False and config["warn_redundant_casts"] is True
     assert not [k for k in config if k in STRICT_FLAGS or k == "implicit_reexport"]

@@ -22,7 +22,6 @@ import warnings
 from dataclasses import dataclass
 from importlib import metadata
 from types import ModuleType
-from typing import Any
 
 from protocol.errors import UserError
 
@@ -74,11 +73,11 @@ def unchecked_versions(checked: dict[str, tuple[str, ...]]) -> list[str]:
     return [f"{library} {version}" for library, version in found.items() if version not in checked[library]]
 
 
-def _resolve(owner: str) -> Any:
+def _resolve(owner: str) -> object:
     module_name, _, qualname = owner.partition(":")
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=EVENTLET_DEPRECATION)
-        obj: Any = importlib.import_module(module_name)
+        obj: object = importlib.import_module(module_name)
     for part in filter(None, qualname.split(".")):
         obj = getattr(obj, part)
     return obj

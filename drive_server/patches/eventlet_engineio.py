@@ -4,15 +4,22 @@ The libraries are imported inside the functions: the command line imports this m
 :mod:`drive_server.transport`) and must not pay for, or print anything from, eventlet before it serves.
 On an upgrade: read each function below against the new library, update ``CHECKED_VERSIONS`` and run
 ``tests/test_wire_patches.py`` and the wire tests it names.
+The three libraries ship no type information: their objects (``ws``, ``sio``, ``eio_server``) are ``Any`` here.
 """
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any
 
 from drive_server.patches import PrivateName
+
+if TYPE_CHECKING:
+    from wsgiref.types import StartResponse, WSGIEnvironment
+
+#: engine.io's ``message`` handler: (eio_sid, the message: text, or bytes for a binary one).
+MessageHandler = Callable[[str, str | bytes], None]
 
 #: The versions every patch below was read against and tested with (the wire tests, the hostile campaign).
 CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {
@@ -111,9 +118,9 @@ def send_close_frame(ws: Any, code: int, reason: str) -> None:
     ws._send_closing_frame(True, close_data=(code, reason))
 
 
-def hooked_websocket_class(base: type, name: str, on_request: Callable[[dict[str, Any]], None] | None = None,
-                           on_upgrade: Callable[[dict[str, Any], Any], None] | None = None,
-                           on_end: Callable[[dict[str, Any]], None] | None = None) -> type:
+def hooked_websocket_class(base: type, name: str, on_request: Callable[[WSGIEnvironment], None] | None = None,
+                           on_upgrade: Callable[[WSGIEnvironment, Any], None] | None = None,
+                           on_end: Callable[[WSGIEnvironment], None] | None = None) -> type:
     """A subclass of engine.io's eventlet ``WebSocketWSGI`` ``base`` calling hooks around each connection.
 
     ``on_request(environ)`` before the WebSocket session, ``on_upgrade(environ, ws)`` once eventlet has built
@@ -124,17 +131,18 @@ def hooked_websocket_class(base: type, name: str, on_request: Callable[[dict[str
     """
     from eventlet.websocket import RFC6455WebSocket
 
-    class Hooked(base):  # type: ignore[misc, valid-type]
-        def __call__(self, environ: dict[str, Any], start_response: Callable) -> Any:
+    class Hooked(base):  # type: ignore[misc]
+        def __call__(self, environ: WSGIEnvironment, start_response: StartResponse) -> Iterable[bytes]:
             if on_request is not None:
                 on_request(environ)
             try:
-                return super().__call__(environ, start_response)  # the whole WebSocket session
+                response: Iterable[bytes] = super().__call__(environ, start_response)  # the whole WebSocket session
+                return response
             finally:
                 if on_end is not None:
                     on_end(environ)
 
-        def _handle_hybi_request(self, environ: dict[str, Any]) -> Any:
+        def _handle_hybi_request(self, environ: WSGIEnvironment) -> Any:
             ws = super()._handle_hybi_request(environ)
             if on_upgrade is not None and isinstance(ws, RFC6455WebSocket):
                 on_upgrade(environ, ws)
@@ -157,7 +165,7 @@ def wrap_websocket_class(eio_server: Any, wrap: Callable[[type], type]) -> None:
     eio_server._async = table
 
 
-def intercept_engine_messages(sio: Any, handler: Callable[[str, Any], None]) -> Callable[[str, Any], None]:
+def intercept_engine_messages(sio: Any, handler: MessageHandler) -> MessageHandler:
     """Route every engine.io message of the ``socketio.Server`` ``sio`` to ``handler(eio_sid, data)`` first;
     returns python-socketio's own handler (``Server._handle_eio_message``, bound) for it to call.
 
@@ -166,12 +174,12 @@ def intercept_engine_messages(sio: Any, handler: Callable[[str, Any], None]) -> 
     ``message`` handler in its constructor; re-registering through engine.io's public ``on`` puts ``handler``
     in its place with no extra call per message. Checked: ``CHECKED_VERSIONS["python-socketio"]``.
     """
-    stock: Callable[[str, Any], None] = sio._handle_eio_message
+    stock: MessageHandler = sio._handle_eio_message
     sio.eio.on("message", handler)
     return stock
 
 
-def run_connect_handler(sio: Any, sid: str, environ: dict[str, Any]) -> Any:
+def run_connect_handler(sio: Any, sid: str, environ: WSGIEnvironment) -> object:
     """Run the ``connect`` handler of ``/`` for ``sid`` as python-socketio would on a CONNECT packet.
 
     Why private: a client joined without a CONNECT packet (the simulator) must still get its ``connect``
