@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any
 
 from protocol.errors import ProtocolError
 
@@ -33,7 +32,7 @@ class SteerCommand:
     throttle: float
 
 
-def parse_number(value: Any, field: str) -> float:
+def parse_number(value: object, field: str) -> float:
     """Parse a telemetry number: a string (``"0.25"``, locale ``"0,25"``, ``"7.8E-05"``) or a number.
 
     Strict on purpose: ASCII decimal only (``float()`` would also take ``"1_000"``, ``"inf"``,
@@ -70,7 +69,7 @@ def parse_number(value: Any, field: str) -> float:
     return number
 
 
-def parse_telemetry(payload: Any) -> Telemetry | None:
+def parse_telemetry(payload: object) -> Telemetry | None:
     """Parse the payload of a ``telemetry`` event; ``None`` means manual mode (a key is held)."""
     if payload is None:
         return None
@@ -106,7 +105,7 @@ def encode_steer(command: SteerCommand) -> dict[str, str]:
     return {"steering_angle": _fmt(steering, 6), "throttle": _fmt(throttle, 6)}
 
 
-def parse_steer(payload: Any) -> SteerCommand:
+def parse_steer(payload: object) -> SteerCommand:
     """Parse a ``steer`` payload (what a simulator client receives)."""
     if not isinstance(payload, dict):
         raise ProtocolError(f"steer: expected a JSON object, got {type(payload).__name__}", field="steer")

@@ -11,12 +11,15 @@ import contextlib
 import logging
 import sys
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, NoReturn
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 log = logging.getLogger(__name__)
 
 
-def _tqdm() -> Any:
+def _tqdm() -> type[tqdm[NoReturn]] | None:
     try:
         from tqdm import tqdm
     except ImportError:
@@ -29,11 +32,11 @@ def interactive() -> bool:
     return sys.stderr.isatty() and _tqdm() is not None
 
 
-def bar(total: float | None, desc: str, unit: str) -> Any:
+def bar(total: float | None, desc: str, unit: str) -> tqdm[NoReturn] | None:
     """A tqdm bar on a terminal, else None."""
-    if not interactive():
+    if not sys.stderr.isatty() or (make := _tqdm()) is None:  # not interactive()
         return None
-    return _tqdm()(total=total, desc=desc, unit=unit, dynamic_ncols=True, leave=True)
+    return make(total=total, desc=desc, unit=unit, dynamic_ncols=True, leave=True)
 
 
 @contextlib.contextmanager
@@ -53,7 +56,7 @@ class Progress:
 
     def __init__(self, desc: str, unit: str = "m") -> None:
         self.desc, self.unit = desc, unit
-        self._bar: Any = None
+        self._bar: tqdm[NoReturn] | Literal[False] | None = None
 
     def __call__(self, done: float, total: float) -> None:
         if self._bar is None:

@@ -17,7 +17,14 @@ import importlib
 import inspect
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import argparse
+
+    from mkdocs.config.defaults import MkDocsConfig
+    from mkdocs.structure.files import Files
+    from mkdocs.structure.pages import Page
 
 README_MARKER = "<!-- generated: readme -->"
 COMMANDS_MARKER = "<!-- generated: commands -->"
@@ -49,7 +56,7 @@ API: tuple[str, ...] = (
 )
 
 
-def _help(parser: Any) -> str:
+def _help(parser: argparse.ArgumentParser) -> str:
     previous = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = str(HELP_COLUMNS)
     try:
@@ -145,7 +152,8 @@ def readme_markdown(readme: Path) -> str:
     return readme.read_text(encoding="utf-8").replace("](docs/", "](")
 
 
-def on_page_markdown(markdown: str, page: Any = None, config: Any = None, files: Any = None) -> str:
+def on_page_markdown(markdown: str, page: Page | None = None, config: MkDocsConfig | None = None,
+                     files: Files | None = None) -> str:
     """MkDocs hook: fill the generated sections of a page."""
     if README_MARKER in markdown:
         root = Path(config["config_file_path"]).parent if config is not None else Path.cwd()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from types import ModuleType
 
 from tools.errors import CommandError
 
@@ -11,7 +11,7 @@ BACKENDS = ("local", "ray")
 INSTALL_HINT = 'install the cluster extra: pip install "robust-behavioral-cloning[cluster]"'
 
 
-def import_ray() -> Any:
+def import_ray() -> ModuleType:
     """The ``ray`` module, or a one-line error saying how to install it."""
     try:
         import ray
@@ -20,7 +20,7 @@ def import_ray() -> Any:
     return ray
 
 
-def init_ray(ray: Any, workers: int, address: str | None) -> bool:
+def init_ray(ray: ModuleType, workers: int, address: str | None) -> bool:
     """Join the cluster at ``address``, or start a private local instance with ``workers`` CPUs.
 
     Returns whether this process started Ray (and so shuts it down); an initialised Ray is reused.

@@ -4,6 +4,7 @@ write the steering model's file with the monitor attached."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,7 +67,7 @@ class FitResult:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def fit_monitor(plan: FitPlan, say: Any = log.info) -> FitResult:
+def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResult:
     contract = SteeringModel(plan.model).contract
     record: dict[str, Any] = {"score": plan.score, "seed": plan.seed}
     if plan.score == AUTOENCODER:
@@ -100,7 +101,7 @@ def fit_monitor(plan: FitPlan, say: Any = log.info) -> FitResult:
     return FitResult(spec, int(record.get("train_frames", 0)), record)
 
 
-def _every_tenth(say: Any, done: int, total: int) -> None:
+def _every_tenth(say: Callable[[str], None], done: int, total: int) -> None:
     """Progress with its total, about ten lines per phase."""
     if done % max(1000, (total // 10000 + 1) * 1000) == 0 or done == total:
         say(f"  {done:,} of {total:,} frames")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import torch
 from torch import nn
@@ -13,6 +13,9 @@ from torch import nn
 from models.networks import runfiles
 from protocol import runrecords
 from protocol.errors import UserError
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 
 class RunDirError(UserError, RuntimeError):
@@ -33,7 +36,7 @@ class State:
 
 
 def save_checkpoint(path: Path, model: nn.Module, optimizer: torch.optim.Optimizer, state: State,
-                    config: Any, best: dict[str, torch.Tensor] | None) -> None:
+                    config: DataclassInstance, best: dict[str, torch.Tensor] | None) -> None:
     payload = {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "state": asdict(state),
                "torch_rng": torch.get_rng_state(), "config": asdict(config), "best_model": best}
     runrecords.write_bytes(path, lambda tmp: torch.save(payload, tmp))

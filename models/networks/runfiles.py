@@ -88,7 +88,7 @@ class RunRecord:
         return cls.from_dict(record, paths.run_dir, history)
 
     @classmethod
-    def from_dict(cls, record: Any, run_dir: str | Path = ".", history: Iterable[EpochRow] = ()) -> RunRecord:
+    def from_dict(cls, record: object, run_dir: str | Path = ".", history: Iterable[EpochRow] = ()) -> RunRecord:
         """A record as training writes it (``config`` an object); :class:`NotARunError` for anything else."""
         where = Path(run_dir) / CONFIG
         if not isinstance(record, dict):

@@ -6,17 +6,20 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
 from drive_server.smoothing import NAME, OFF, OLD_NAMES, SERVING_KEY, serving_json
+
+if TYPE_CHECKING:
+    import onnx
 
 
 @dataclass(frozen=True)
 class SteeringGraph:
     """An ONNX steering model as read from its file: the graph and what its metadata says."""
 
-    proto: Any  # onnx.ModelProto
+    proto: onnx.ModelProto
     input_name: str
     output_name: str
     shape: tuple[int | str | None, ...]  # the input's dimensions; a name or None where not fixed
@@ -53,7 +56,7 @@ def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
                          info if isinstance(info, dict) else {})
 
 
-def set_model_metadata(proto: Any, info: dict[str, Any], smoothing: float = OFF,
+def set_model_metadata(proto: onnx.ModelProto, info: dict[str, Any], smoothing: float = OFF,
                        contract: PreprocessContract | None = None) -> None:
     """Replace ``proto``'s model info (and its contract, if given) and ask for ``smoothing`` (< 1); keys the
     model already carries otherwise stay."""

@@ -92,7 +92,7 @@ SECTIONS: dict[str, dict[str, str]] = {
 #: TrainConfig fields no recipe holds: where the data is and how this machine runs it (the command line's).
 NOT_IN_RECIPES = ("data", "out", "val_data", "threads", "decode_workers", "progress")
 #: Keys whose value is one of a few words or numbers.
-CHOICES: dict[str, tuple[Any, ...]] = {
+CHOICES: dict[str, tuple[str | int, ...]] = {
     "split": tuple(k.value for k in SplitKind), "min_speed_unit": tuple(u.value for u in SpeedUnit),
     "speed_unit": tuple(u.value for u in SpeedUnit), "brightness_mode": BRIGHTNESS_MODES, "behavior": BEHAVIORS,
     "arch": tuple(a.value for a in Arch), "approach": tuple(a.value for a in Approach),

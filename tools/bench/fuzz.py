@@ -26,13 +26,17 @@ import socket
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from protocol import SteerCommand
 from tools.bench.fuzz_campaign import Mix, Tally, fuzz_connection
 from tools.wire.frames import SourceFrame as Frame
+
+if TYPE_CHECKING:
+    from multiprocessing.queues import Queue
+    from multiprocessing.synchronize import Event
 from tools.wire.unity_client import UnityWireClient
 
 log = logging.getLogger("rbc.fuzz")
@@ -46,7 +50,8 @@ log = logging.getLogger("rbc.fuzz")
 
 
 # -- phase 2 -------------------------------------------------------------------------------------------
-def _healthy(url: str, payload: dict[str, str], n: int, duration: float, out: Any) -> None:
+def _healthy(url: str, payload: dict[str, str], n: int, duration: float,
+             out: Queue[list[tuple[float, float]]]) -> None:
     """``n`` closed-loop clients at 30 Hz for ``duration`` s; puts [(time.monotonic() sent, round trip s)]."""
     samples: list[tuple[float, float]] = []
     lock = threading.Lock()
@@ -83,7 +88,7 @@ def _step_aside() -> None:
         os.nice(19)
 
 
-def _flooder(url: str, stop: Any, nice: bool) -> None:
+def _flooder(url: str, stop: Event, nice: bool) -> None:
     """Writes manual-mode telemetries without ever reading; reconnects whenever it is dropped."""
     if nice:
         _step_aside()
@@ -99,7 +104,7 @@ def _flooder(url: str, stop: Any, nice: bool) -> None:
             time.sleep(0.05)
 
 
-def _fuzzer(url: str, frames: list[Frame], reference: list[SteerCommand | None], stop: Any, nice: bool,
+def _fuzzer(url: str, frames: list[Frame], reference: list[SteerCommand | None], stop: Event, nice: bool,
             seed: int) -> None:
     if nice:
         _step_aside()

@@ -17,7 +17,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,6 +25,10 @@ from drive_server.stats import STAGES
 from tools.wire.frames import SourceFrame, log_frames, synthetic_frames
 from tools.wire.server_process import ServerProcess
 from tools.wire.unity_client import UnityWireClient
+
+if TYPE_CHECKING:
+    from multiprocessing.queues import Queue
+    from multiprocessing.synchronize import Barrier
 
 log = logging.getLogger("rbc.bench")
 
@@ -56,7 +60,8 @@ def load_frames(log_dir: Path | None) -> tuple[list[SourceFrame], str]:
     return synthetic_frames(64), "64 synthetic frames"
 
 
-def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Any = None) -> dict[str, Any]:
+def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int,
+                 barrier: Barrier | None = None) -> dict[str, Any]:
     """One client: warm up, wait for the others, then ``frames_n`` timed exchanges."""
     frames, _ = load_frames(log_dir)
     payloads = [f.payload() for f in frames]
@@ -73,7 +78,8 @@ def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int, bar
     return {"rtts": rtts, "start": start, "end": end}
 
 
-def _worker(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Any, results: Any) -> None:
+def _worker(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Barrier,
+            results: Queue[dict[str, Any]]) -> None:
     try:
         results.put(_closed_loop(url, log_dir, frames_n, warmup, barrier))
     except BaseException as exc:  # report, never hang the parent

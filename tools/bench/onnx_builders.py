@@ -9,12 +9,16 @@ in their metadata like a trained export would. ``onnx`` (train extra) is importe
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PAPER_CONTRACT, PreprocessContract
 from models.networks.architectures import ARCHITECTURES, Architecture
+
+if TYPE_CHECKING:
+    import onnx
 
 OPSET = 17
 
@@ -23,7 +27,7 @@ Arch = Architecture  # short name used by the benchmarks and tests
 ARCHS = ARCHITECTURES
 
 
-def _onnx() -> Any:
+def _onnx() -> ModuleType:
     try:
         import onnx
     except ModuleNotFoundError:
@@ -34,7 +38,7 @@ def _onnx() -> Any:
 
 
 def build_model(arch: Arch, contract: PreprocessContract | None = None, seed: int = 0,
-                with_metadata: bool = True, layout: str = "nhwc") -> Any:
+                with_metadata: bool = True, layout: str = "nhwc") -> onnx.ModelProto:
     """An ``onnx.ModelProto`` of ``arch`` with Glorot-uniform random weights and zero biases.
 
     ``layout`` is the input layout (NHWC like the paper's Keras models, or NCHW like a torch export);
@@ -114,6 +118,6 @@ def save_model(arch: Arch | str, path: Path, **kwargs: Any) -> Path:
     return path
 
 
-def count_parameters(model: Any) -> int:
+def count_parameters(model: onnx.ModelProto) -> int:
     """Number of weights in a ``ModelProto``'s initializers."""
     return sum(int(np.prod(t.dims)) for t in model.graph.initializer)

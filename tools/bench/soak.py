@@ -14,6 +14,7 @@ from __future__ import annotations
 import bisect
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -79,7 +80,7 @@ class Soak(SoakMix):
         self.samples: list[Sample] = []
 
     # -- the run ----------------------------------------------------------------------------------
-    def run(self, progress: Any = None) -> dict[str, Any]:
+    def run(self, progress: Callable[[float, Sample], None] | None = None) -> dict[str, Any]:
         cfg = self.config
         with UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S) as client:  # the recorder opens its log
             for payload in self.payloads[:3]:

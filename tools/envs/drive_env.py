@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib.util
 from collections import deque
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -20,6 +20,12 @@ from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
 from protocol.errors import BadValue, UserError
 from tools.envs.client import HeadlessSimClient
 from tools.envs.config import config_from_kwargs, resolve_track
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from drive_server.monitor import ClientMonitor
+    from drive_server.pipeline import DrivePipeline
 
 FRAME_SHAPE = (FRAME_HEIGHT, FRAME_WIDTH, 3)
 
@@ -101,7 +107,7 @@ class DriveEnv(gym.Env):
         self._relabel_auto_reset(info)
         return obs, info
 
-    def step(self, action: Any):
+    def step(self, action: ArrayLike):
         if self.client.sim is None:
             if self._closed:
                 raise EnvClosedError("step() after close(): this rbc/Drive-v0 environment is closed",
@@ -137,7 +143,7 @@ class DriveEnv(gym.Env):
         self.client.expert = None
 
     # --- what the agent gets ------------------------------------------------------------------------
-    def command(self, action: Any) -> SteerCommand:
+    def command(self, action: ArrayLike) -> SteerCommand:
         """The steer command an action asks for: steering as given; throttle and brake from Eq. 14 on the
         telemetry speed (``control="steer"``, as drive_server's pipeline computes them) or the second action,
         cut to 0 at the speed limit (``control="steer_throttle"``)."""
@@ -205,7 +211,7 @@ class DriveEnv(gym.Env):
         return info
 
     @staticmethod
-    def _load_monitor(path: str | None) -> tuple[Any, Any]:
+    def _load_monitor(path: str | None) -> tuple[DrivePipeline | None, ClientMonitor | None]:
         """(the monitor's pipeline, None until reset) for ``monitor=PATH``; one line if the file has none."""
         if path is None:
             return None, None
@@ -226,6 +232,7 @@ class DriveEnv(gym.Env):
         from protocol.jpeg import decode_jpeg
 
         pipeline = self._monitor_pipeline
+        assert pipeline is not None  # _info scores only with a monitor
         rgb = decode_jpeg(jpeg, pipeline.reduce) if jpeg else self._frame
         assert rgb is not None  # _info scores only after a frame was rendered
         return preprocess(rgb, pipeline.contract)

@@ -22,6 +22,9 @@ from protocol.jpeg import decode_jpeg
 from tools.envs.config import CONTROLS
 from tools.sim.driving.model_rig import model_rig
 
+#: What the env observes: the centre camera's frame, or a dict of frames by camera (``cameras=...``).
+Observation = np.ndarray | dict[str, np.ndarray]
+
 
 class OnnxPolicy:
     """``policy(obs, info) -> action`` for an environment made with the same ``control`` (and, for
@@ -46,7 +49,7 @@ class OnnxPolicy:
         """Forget the smoothing state (a new client); done by itself when ``info["step"]`` is 0."""
         self.smoother = self.pipeline.smoother()
 
-    def steering(self, obs: Any, info: dict[str, Any] | None = None) -> float:
+    def steering(self, obs: Observation, info: dict[str, Any] | None = None) -> float:
         """The model's smoothed steering (-1..1) for one observation."""
         info = info or {}
         if info.get("step") == 0:
@@ -58,7 +61,7 @@ class OnnxPolicy:
             rgb = obs["center"] if isinstance(obs, dict) else np.asarray(obs)
         return self.pipeline.steer(rgb, self.smoother)
 
-    def __call__(self, obs: Any, info: dict[str, Any] | None = None) -> np.ndarray:
+    def __call__(self, obs: Observation, info: dict[str, Any] | None = None) -> np.ndarray:
         steering = self.steering(obs, info)
         if self.control == "steer":
             return np.array([steering], np.float32)

@@ -45,7 +45,7 @@ class EvalRecord:
         return cls.from_dict(read_json(path), eval_dir)
 
     @classmethod
-    def from_dict(cls, record: Any, eval_dir: str | Path = ".") -> EvalRecord:
+    def from_dict(cls, record: object, eval_dir: str | Path = ".") -> EvalRecord:
         """A record as ``rbc eval`` writes it (an older one may lack a summary or runs)."""
         where = cls.path(eval_dir)
         if not isinstance(record, dict) or not isinstance(record.get("meta"), dict):

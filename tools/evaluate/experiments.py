@@ -32,6 +32,8 @@ class BehaviorSetup:
 
 #: Training scenes of the bundled models (rbc collect uses the same cone seed for collision data).
 TRAINING_CONE_SEED = 1
+#: A value an experiment varies (cones, a fraction, a switch; None where it varies nothing).
+AxisValue = float | int | bool | None
 SETUPS: dict[str, BehaviorSetup] = {
     "simplistic": BehaviorSetup("lake"),
     "rigorous": BehaviorSetup("mountain"),
@@ -57,7 +59,7 @@ class Experiment:
     title: str
     measure: Literal["eta", "range", "max", "worlds"]
     parameter: str | None = None  # the ScenarioConfig field that is varied
-    values: tuple[Any, ...] = (None,)
+    values: tuple[AxisValue, ...] = (None,)
     origin: float = 0.0
     step: float = 0.0
     lower_cap: float = 0.0

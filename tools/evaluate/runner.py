@@ -16,10 +16,13 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drive_server.control import ControlLaw
 from protocol.appending import append_record
+
+if TYPE_CHECKING:
+    from tools.evaluate.experiments import AxisValue
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +47,7 @@ class Task:
 
     experiment: str
     behavior: str
-    value: Any
+    value: AxisValue
     seed: int
     scenario: dict[str, Any] = field(default_factory=dict)  # ScenarioConfig keyword arguments
     map_dir: str | None = None  # write a trajectory map here if the run is not autonomous
@@ -104,7 +107,7 @@ def _init_worker() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
-def task_key(experiment: str, value: Any, seed: int, scenario: dict[str, Any]) -> str:
+def task_key(experiment: str, value: AxisValue, seed: int, scenario: dict[str, Any]) -> str:
     """What makes two runs the same run: a resumed evaluation reuses a journaled record with this key."""
     return json.dumps([experiment, value, seed, scenario], sort_keys=True)
 

@@ -15,7 +15,15 @@ from pathlib import Path
 from typing import Any
 
 from protocol.facts import DEPLOY_SPEED_KMH
-from tools.evaluate.experiments import EXPERIMENTS, PAPER_EXPERIMENTS, SETUPS, Experiment, is_autonomous, run_eta
+from tools.evaluate.experiments import (
+    EXPERIMENTS,
+    PAPER_EXPERIMENTS,
+    SETUPS,
+    AxisValue,
+    Experiment,
+    is_autonomous,
+    run_eta,
+)
 from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
 from tools.sim.render.camera import DEFAULT_RIG
@@ -53,18 +61,19 @@ def base_scenario(cfg: SuiteConfig) -> dict[str, Any]:
     return scenario
 
 
-def _scenario_for(exp: Experiment, value: Any, cfg: SuiteConfig, seed: int) -> dict[str, Any]:
+def _scenario_for(exp: Experiment, value: AxisValue, cfg: SuiteConfig, seed: int) -> dict[str, Any]:
     scenario = {**base_scenario(cfg), **exp.fixed, "seed": seed, "realtime": exp.realtime, "spawn_noise": True}
     if exp.parameter == "spawn_fraction":
         from tools.sim.track.files import load_track
 
+        assert value is not None  # a fraction of the lap
         scenario["spawn_s"] = float(value) * load_track(scenario["track"]).length
     elif exp.parameter is not None:
         scenario[exp.parameter] = value
     return scenario
 
 
-def _task(exp: Experiment, value: Any, cfg: SuiteConfig, seed: int) -> Task:
+def _task(exp: Experiment, value: AxisValue, cfg: SuiteConfig, seed: int) -> Task:
     return Task(exp.key, cfg.behavior, value, seed, _scenario_for(exp, value, cfg, seed), cfg.map_dir)
 
 

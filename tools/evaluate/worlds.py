@@ -11,6 +11,7 @@ from __future__ import annotations
 import statistics
 from dataclasses import asdict
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from protocol.errors import BadValue
@@ -82,7 +83,7 @@ def format_worlds(entry: dict[str, Any]) -> str:
             f"no intervention; worst: world {worst['seed']}, {worst['eta']:.1f} %)")
 
 
-def plot_worlds(entry: dict[str, Any], path: Path, plt: Any) -> Path | None:
+def plot_worlds(entry: dict[str, Any], path: Path, plt: ModuleType) -> Path | None:  # plt: matplotlib.pyplot
     """eta per world as bars (green: no intervention, red: intervention), the mean dashed."""
     worlds = entry.get("worlds") or []
     if not worlds:

@@ -4,15 +4,20 @@ the warning and alarm stretches shaded, each take-over marked with the lead of t
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tools.monitoreval.scoring import DEFAULT_RULES, ScoringRules, first_warning_leads
 from tools.monitoreval.summary import run_trace
 
+if TYPE_CHECKING:
+    from tools.sim.driving.drivers import OnnxDriver
+    from tools.sim.driving.scenario import RunResult
 
-def plot_run(driver: Any, result: Any, path: Path, title: str = "", rules: ScoringRules = DEFAULT_RULES) -> Path:
+
+def plot_run(driver: OnnxDriver, result: RunResult, path: Path, title: str = "",
+             rules: ScoringRules = DEFAULT_RULES) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -20,6 +25,7 @@ def plot_run(driver: Any, result: Any, path: Path, title: str = "", rules: Scori
 
     from protocol.runrecords import atomic_path
 
+    assert driver.monitor is not None, "a monitored run"
     spec = driver.monitor.state.spec
     t = np.array([w for w, _ in driver.readings])
     mean = np.array([r.mean if r is not None else np.nan for _, r in driver.readings])

@@ -6,12 +6,15 @@ from __future__ import annotations
 import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from tools.monitoreval.runset import RunSpec
 from tools.monitoreval.scoring import MISBEHAVIOUR_CAUSES, RunTrace, ScoringRules, score
+
+if TYPE_CHECKING:
+    from drive_server.monitor import MonitorSpec
 
 
 @dataclass(frozen=True)
@@ -74,7 +77,7 @@ def closed_loop(results: Sequence[tuple[RunSpec, str, dict[str, Any]]]) -> dict[
     return out
 
 
-def replayed(spec: RunSpec, run: dict[str, Any], name: str, monitor: Any) -> RunTrace:
+def replayed(spec: RunSpec, run: dict[str, Any], name: str, monitor: MonitorSpec) -> RunTrace:
     """A shadow monitor's trace: its per-frame scores through the server's own state machine, with its
     thresholds (``monitor``: its MonitorSpec)."""
     from drive_server.monitor import MonitorState
@@ -86,7 +89,7 @@ def replayed(spec: RunSpec, run: dict[str, Any], name: str, monitor: Any) -> Run
 
 
 def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules,
-            shadows: dict[str, Any], primary: str) -> list[dict[str, Any]]:
+            shadows: dict[str, MonitorSpec], primary: str) -> list[dict[str, Any]]:
     """Every monitor on the same ``warn`` drives, one row each (the driving one first)."""
     warn = [(s, r) for s, m, r in results if m == "warn"]
     out = []
@@ -116,7 +119,7 @@ def _at_threshold(spec: RunSpec, run: dict[str, Any], name: str | None, warn: fl
 
 
 def sweep(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules,
-          monitors: dict[str | None, tuple[str, Any]]) -> list[dict[str, Any]]:
+          monitors: dict[str | None, tuple[str, MonitorSpec]]) -> list[dict[str, Any]]:
     """Each monitor at lower warning thresholds than its calibrated one, on the same drives: what a looser
     false-alarm target would buy. ``monitors``: shadow name (None: the driving one) -> (label, its MonitorSpec).
     The thresholds are the calibration's own 99th percentile, halfway to its maximum, and the calibrated one."""

@@ -12,13 +12,17 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from protocol.codeversion import code_digest
 from protocol.errors import BadValue
 from tools.monitoreval.runset import RunSpec
+
+if TYPE_CHECKING:
+    from drive_server.monitor import ClientMonitor, MonitorGraph, MonitorReading
+    from tools.sim.driving.drivers import Scene
 
 log = logging.getLogger(__name__)
 
@@ -73,11 +77,11 @@ class _Shadowed:
     """The driving monitor, and other monitors scored on the very same inputs (so monitors are compared on one
     drive, not on two drives that differ); only the first acts."""
 
-    def __init__(self, primary: Any, shadows: list[Any]) -> None:
+    def __init__(self, primary: ClientMonitor, shadows: list[MonitorGraph]) -> None:
         self.primary, self.shadows = primary, shadows
         self.scores: list[list[float]] = [[] for _ in shadows]
 
-    def observe(self, x: np.ndarray) -> Any:
+    def observe(self, x: np.ndarray) -> MonitorReading | None:
         reading = self.primary.observe(x)
         for graph, out in zip(self.shadows, self.scores, strict=True):
             out.append(graph.score(x))
@@ -106,7 +110,7 @@ def drive(spec: RunSpec, model: Path, mode: str, shadows: tuple[Path, ...] = ())
         graphs.append(found[1])
 
     class Driver(OnnxDriver):
-        def start(self, scene: Any) -> None:
+        def start(self, scene: Scene) -> None:
             super().start(scene)
             if self.monitor is not None and graphs:
                 self.monitor = _Shadowed(self.monitor, graphs)  # type: ignore[assignment]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,16 +14,22 @@ from tools.monitoreval.scoring import (
     first_warning_leads,
 )
 
+if TYPE_CHECKING:
+    from tools.sim.driving.drivers import OnnxDriver
+    from tools.sim.driving.scenario import RunResult
 
-def run_trace(driver: Any, result: Any, name: str = "run", group: str = "perturbed") -> RunTrace:
+
+def run_trace(driver: OnnxDriver, result: RunResult, name: str = "run", group: str = "perturbed") -> RunTrace:
     t = np.array([when for when, _ in driver.readings], dtype=np.float64)
     level = np.array([int(r.level) if r is not None else 0 for _, r in driver.readings], dtype=np.uint8)
     takeovers = [(i.t, str(i.cause)) for lap in result.laps for i in lap.interventions]
     return RunTrace(name, group, t, level, takeovers, result.sim_time_s)
 
 
-def monitor_summary(driver: Any, result: Any, rules: ScoringRules = DEFAULT_RULES) -> str:
-    spec, state = driver.monitor.state.spec, driver.monitor.state
+def monitor_summary(driver: OnnxDriver, result: RunResult, rules: ScoringRules = DEFAULT_RULES) -> str:
+    monitor = driver.monitor
+    assert monitor is not None, "a monitored run"
+    spec, state = monitor.state.spec, monitor.state
     trace = run_trace(driver, result)
     found = first_warning_leads(trace, rules)
     foreseen = [x for x in found if x[2] is not None]
@@ -32,8 +38,8 @@ def monitor_summary(driver: Any, result: Any, rules: ScoringRules = DEFAULT_RULE
             f"foreseen: {len(foreseen)} of {len(found)}")
     if foreseen:
         text += " (lead " + ", ".join(f"{lead:.1f} s" for *_, lead in foreseen) + ")"
-    if driver.monitor.failed:
-        text += f"; switched off: {driver.monitor.failed}"
+    if monitor.failed:
+        text += f"; switched off: {monitor.failed}"
     skipped = sum(1 for _, c in trace.takeovers if c in MISBEHAVIOUR_CAUSES) - len(found)
     if skipped:
         text += f"; {skipped} more within {rules.settle_s:g} s of the previous take-over"

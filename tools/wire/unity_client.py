@@ -15,7 +15,7 @@ import json
 import logging
 import time
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -23,6 +23,9 @@ import numpy as np
 from protocol import SteerCommand, parse_steer
 from protocol.errors import BadValue
 from tools.wire.websocket import OP_BINARY, OP_TEXT, ConnectionClosed, WebSocketConnection, client_frame
+
+if TYPE_CHECKING:
+    import socket
 
 log = logging.getLogger(__name__)
 
@@ -103,9 +106,11 @@ class UnityWireClient:
         self._last_ping_sent = time.monotonic()
 
     @property
-    def socket(self) -> Any:
-        """The TCP socket under the WebSocket (hostile tests write raw, unframed bytes to it)."""
-        return self._ws.socket
+    def socket(self) -> socket.socket:
+        """The TCP socket under the WebSocket (hostile tests write raw, unframed bytes to it); connected only."""
+        sock = self._ws.socket
+        assert sock is not None, "not connected"
+        return sock
 
     def close(self) -> None:
         """Send a WebSocket close frame and close the socket (idempotent)."""

@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING
 
 from protocol.errors import BadValue
+
+if TYPE_CHECKING:
+    from tools.sim.driving.scenario import FrameEvent
 
 
 class WallClockPacer:
@@ -25,7 +28,7 @@ class WallClockPacer:
         self.speed, self._clock, self._sleep = speed, clock, sleep
         self._start: float | None = None
 
-    def __call__(self, event: Any) -> None:
+    def __call__(self, event: FrameEvent) -> None:
         now = self._clock()
         if self._start is None:
             self._start = now - event.t / self.speed
@@ -34,11 +37,11 @@ class WallClockPacer:
             self._sleep(wait)
 
 
-def hooks(*callbacks: Callable[[Any], None] | None) -> Callable[[Any], None]:
+def hooks(*callbacks: Callable[[FrameEvent], None] | None) -> Callable[[FrameEvent], None]:
     """One ``on_frame`` hook calling each given one (``None`` entries are skipped)."""
-    chosen: Iterable[Callable[[Any], None]] = [c for c in callbacks if c is not None]
+    chosen: Iterable[Callable[[FrameEvent], None]] = [c for c in callbacks if c is not None]
 
-    def on_frame(event: Any) -> None:
+    def on_frame(event: FrameEvent) -> None:
         for callback in chosen:
             callback(event)
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +37,9 @@ from protocol import encode_image
 from tools.sim.driving.rules import DEFAULT_RULES, Rules
 from tools.sim.driving.scenario import FrameEvent, RunResult, ScenarioConfig
 from tools.sim.driving.simulation import Simulation
+
+if TYPE_CHECKING:
+    from tools.sim.driving.drivers import Driver
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +49,7 @@ PIPELINE_DEPTH = 2
 __all__ = ["PIPELINE_DEPTH", "run_scenario"]
 
 
-def run_scenario(config: ScenarioConfig, driver: Any, progress: Callable[[float, float], None] | None = None,
+def run_scenario(config: ScenarioConfig, driver: Driver, progress: Callable[[float, float], None] | None = None,
                  on_frame: Callable[[FrameEvent], None] | None = None, rules: Rules = DEFAULT_RULES,
                  render: bool = True) -> RunResult:
     """Drive ``config.laps`` laps with ``driver`` (see :mod:`tools.sim.driving.drivers`) and score them.

@@ -115,7 +115,7 @@ def _load_text(text: str, source: str) -> Track:
     return parse_track(data, source)
 
 
-def parse_track(data: Any, source: str = "<dict>") -> Track:
+def parse_track(data: object, source: str = "<dict>") -> Track:
     """Validate a decoded track definition and build the :class:`Track`.
 
     Keys: ``name``, ``version`` (1 or 2), ``centerline`` ([[x, y], ...] metres, at least 4 points, closed,
@@ -187,7 +187,7 @@ def parse_track(data: Any, source: str = "<dict>") -> Track:
     )
 
 
-def _control_points(raw: Any, r: Reader) -> np.ndarray:
+def _control_points(raw: object, r: Reader) -> np.ndarray:
     if not isinstance(raw, list):
         r.fail("'centerline' must be a list of [x, y] points")
     if len(raw) > MAX_CONTROL_POINTS:  # the spline solve is O(n^2) in memory: refuse before allocating
@@ -228,7 +228,7 @@ def _check_overlap(pts: np.ndarray, s: np.ndarray, length: float, clearance: flo
                f"centre lines {d:.1f} m apart, road plus shoulders need {clearance:.1f} m")
 
 
-def _surface(item: Any, i: int, length: float, r: Reader, kinds: tuple[str, ...]) -> Surface:
+def _surface(item: object, i: int, length: float, r: Reader, kinds: tuple[str, ...]) -> Surface:
     if not isinstance(item, dict):
         r.fail(f"surfaces[{i}] must be an object with from_s, to_s, kind")
     r.keys(item, f"surfaces[{i}]", {"from_s", "to_s", "kind"})

@@ -15,8 +15,6 @@ density factor), ``blur`` (sigma px), ``noise`` (grey levels), ``jpeg_quality`` 
 
 from __future__ import annotations
 
-from typing import Any
-
 from tools.sim.track.looks import (
     CENTER_COLORS,
     LINE_COLORS,
@@ -40,7 +38,7 @@ def _choice(r: Reader, obj: dict, key: str, allowed: tuple[str, ...], default: s
     return v
 
 
-def _rgb(r: Reader, v: Any, where: str) -> tuple[int, int, int]:
+def _rgb(r: Reader, v: object, where: str) -> tuple[int, int, int]:
     if (not isinstance(v, list) or len(v) != 3
             or not all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 255 for c in v)):
         r.fail(f"{where} must be [r, g, b] integers 0..255, got {v!r}")
