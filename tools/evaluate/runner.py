@@ -23,6 +23,7 @@ from protocol.appending import append_record
 
 if TYPE_CHECKING:
     from tools.evaluate.experiments import AxisValue
+    from tools.sim.driving.drivers import OnnxDriver, SocketDriver
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ class Task:
     track_doc: dict[str, Any] | None = field(default=None, compare=False, repr=False)
 
 
-_DRIVERS: dict[tuple, Any] = {}
+_DRIVERS: dict[tuple[DriverSpec, float | None], OnnxDriver | SocketDriver] = {}
 
 
 def _driver(spec: DriverSpec, speed_limit_kmh: float):
