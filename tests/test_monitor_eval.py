@@ -100,6 +100,11 @@ def test_a_tiny_benchmark_drives_scores_resumes_and_records(tmp_path):
     again = runner.drive_all(specs, model, ("warn", "act"), out, shadows=(shadow,))
     monkey.undo()
     assert calls == [] and [r for *_, r in again] == [r for *_, r in results]
+    monkey.setattr(runner, "drive", lambda *a: calls.append(a))
+    monkey.setattr(runner, "code_digest", lambda *a: "another code")  # the code that drives has changed since
+    rescored = runner.drive_all(specs, model, ("warn", "act"), out, shadows=(shadow,), rescore=True)
+    monkey.undo()
+    assert calls == [] and [r for *_, r in rescored] == [r for *_, r in results]
     monitors = compare(results, RULES, {"calm.onnx": calm}, "brightness")
     assert [m["monitor"] for m in monitors] == ["brightness", "calm.onnx"]
     assert monitors[1]["figures"]["episodes"] == 0 and monitors[0]["figures"]["episodes"] > 0

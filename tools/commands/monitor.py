@@ -60,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ev.add_argument("--also", type=Path, action="append", default=[], metavar="M.onnx",
                     help="another monitor to compare on the very same drives: the same steering model with another "
                          "monitor attached (repeat)")
+    ev.add_argument("--rescore", action="store_true",
+                    help="drive nothing: score the runs OUT's journal holds again (after a change of the scoring "
+                         "or the tables), whatever code drove them; the record lists those code versions")
     ev.add_argument("--workers", type=int, default=EvalPlan.workers,
                     help="processes driving runs side by side (default %(default)s)")
     ev.add_argument("--cost-log", type=Path, default=None, metavar="DIR",
@@ -88,7 +91,8 @@ def _eval(args: argparse.Namespace) -> int:
         sample = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
         cost_log = sample if sample.is_dir() else None
     plan = EvalPlan(args.model, args.out, nominal=args.nominal, per_setting=args.per_setting, act=args.act,
-                    cost_log=cost_log, workers=args.workers, shadows=tuple(args.also))
+                    cost_log=cost_log, workers=args.workers, shadows=tuple(args.also),
+                    rescore=args.rescore)
     import logging
 
     if not logging.getLogger().isEnabledFor(logging.DEBUG):  # hundreds of runs: their state changes only with -v

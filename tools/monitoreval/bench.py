@@ -3,6 +3,7 @@ write the record (seed, plan, code version) and its tables, each through a tempo
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ class EvalPlan:
     cost_log: Path | None = None  # recorded frames to time the server's pipeline on
     workers: int = 1  # processes driving runs side by side
     shadows: tuple[Path, ...] = ()  # other monitors (files of the same steering model) scored on the same drives
+    rescore: bool = False  # score the journal's runs again without driving (whatever code drove them)
     rules: ScoringRules = field(default_factory=ScoringRules)
 
     def specs(self) -> list[RunSpec]:
@@ -57,12 +59,14 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
         if other is None:
             raise BadValue(f"{path.name} carries no monitor")
         shadow_specs[path.name] = other[0]
-    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress, plan.workers, plan.shadows)
+    results = drive_all(plan.specs(), plan.model, modes, plan.out, progress, plan.workers, plan.shadows,
+                        plan.rescore)
     record: dict[str, Any] = {
         "model": plan.model.name, "model_sha256": file_digest(plan.model),
         "monitor": {"score": spec.score, "warn": spec.warn, "alarm": spec.alarm, "window": spec.window,
                     "calibration": spec.calibration},
         "plan": plan.to_dict(), "code_version": code_version(),
+        "drive_code": sorted({json.loads(k)["code"] for k in _journal_keys(plan.out)}),
         "runs": {"total": len(results), "nominal": plan.nominal, "per_setting": plan.per_setting},
         "figures": figures(results, plan.rules),
         "closed_loop": closed_loop(results) if plan.act else {},
@@ -77,3 +81,10 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
     write_json(plan.out / RECORD, record)
     write_text(plan.out / TABLES, tables(record))
     return record
+
+
+def _journal_keys(out: Path) -> list[str]:
+    """The keys of the runs in ``out``'s journal (the versions of the code that drove them)."""
+    from tools.monitoreval.runner import JOURNAL, Journal
+
+    return list(Journal(out / JOURNAL).done)

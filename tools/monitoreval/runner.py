@@ -164,15 +164,25 @@ class Journal:
 
 def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Path,
               progress: Callable[[int, int, str], None] | None = None,
-              workers: int = 1, shadows: tuple[Path, ...] = ()) -> list[tuple[RunSpec, str, dict[str, Any]]]:
+              workers: int = 1, shadows: tuple[Path, ...] = (),
+              rescore: bool = False) -> list[tuple[RunSpec, str, dict[str, Any]]]:
     """Every spec in every mode, resuming from ``out``'s journal; (spec, mode, run) in a fixed order whatever
     ``workers`` (processes driving runs side by side; each run is deterministic, so the order of finishing
-    changes nothing but the journal's line order)."""
+    changes nothing but the journal's line order).
+
+    ``rescore``: drive nothing; take each run from the journal whatever code drove it (its other key parts must
+    match), for new scoring rules or tables over the same drives. A run the journal lacks is an error.
+    """
     import concurrent.futures
     import multiprocessing
 
     journal = Journal(out / JOURNAL)
     code = code_digest(*RUN_CODE)
+    if rescore:
+        by_rest: dict[str, tuple[str, dict[str, Any]]] = {}
+        for key, run in journal.done.items():
+            parts = json.loads(key)
+            by_rest[json.dumps({k: v for k, v in parts.items() if k != "code"}, sort_keys=True)] = (parts["code"], run)
     models = out / "models"
     shadow_digests = tuple(file_digest(p) for p in shadows)
     todo: dict[str, tuple[RunSpec, Path, str]] = {}
@@ -182,6 +192,12 @@ def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Pa
         digest = file_digest(path)
         for mode in modes:
             key = RunKey(spec, mode, digest, code, shadow_digests).text()
+            if rescore:
+                rest = json.dumps({k: v for k, v in json.loads(key).items() if k != "code"}, sort_keys=True)
+                if rest not in by_rest:
+                    raise BadValue(f"{out / JOURNAL} has no run {spec.name} ({mode}) of this model to score again",
+                                   "drop --rescore to drive it")
+                key = RunKey(spec, mode, digest, by_rest[rest][0], shadow_digests).text()
             order.append((spec, mode, key))
             if key not in journal.done:
                 todo[key] = (spec, path, mode)
