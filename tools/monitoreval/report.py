@@ -89,12 +89,16 @@ def replayed(spec: RunSpec, run: dict[str, Any], name: str, monitor: MonitorSpec
 
 
 def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules,
-            shadows: dict[str, MonitorSpec], primary: str) -> list[dict[str, Any]]:
-    """Every monitor on the same ``warn`` drives, one row each (the driving one first)."""
+            shadows: dict[str, MonitorSpec], primary: str,
+            labels: dict[str, str] | None = None) -> list[dict[str, Any]]:
+    """Every monitor on the same ``warn`` drives, one row each (the driving one first); ``labels``: a shadow's
+    name in the table (default: its file's)."""
     warn = [(s, r) for s, m, r in results if m == "warn"]
     out = []
+    labels = labels or {}
     for name, traces in [(primary, [trace(s, r) for s, r in warn]),
-                         *[(n, [replayed(s, r, n, spec) for s, r in warn]) for n, spec in shadows.items()]]:
+                         *[(labels.get(n, n), [replayed(s, r, n, spec) for s, r in warn])
+                           for n, spec in shadows.items()]]:
         f = score(traces, rules)
         out.append({"monitor": name, "r1": _pct(f.recall_at["1"]), "r2": _pct(f.recall_at["2"]),
                     "r3": _pct(f.recall_at["3"]), "r46": _pct(f.recall_4_6), "f3": f"{f.f3_1_3:.2f}",
@@ -144,9 +148,8 @@ def figures(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
     """The monitor's figures on the ``warn`` runs (which drive exactly as without a monitor)."""
     traces = [trace(s, r) for s, m, r in results if m == "warn"]
     by_axis: dict[str, Any] = {}
-    for axis in sorted({t.meta["axis"] for t in traces if t.group != "nominal"}):
-        part = [t for t in traces if t.group == "nominal" or t.meta["axis"] == axis]
-        f = score(part, rules)
+    for axis in sorted({t.meta["axis"] for t in traces}):
+        f = score([t for t in traces if t.meta["axis"] == axis], rules)  # "none": the nominal runs' own failures
         by_axis[axis] = {"misbehaviours": f.misbehaviours, "recall_1": f.recall_at["1"],
                          "recall_3": f.recall_at["3"], "lead_median_s": f.lead_median_s}
     return {"all": score(traces, rules).to_dict(), "by_axis": by_axis,
@@ -219,8 +222,9 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
     def s(x: float | None) -> str:
         return "-" if x is None else f"{x:.1f} s"
 
-    anchors = [{"monitor": f"ours: {record['monitor']['score']}, held-out thresholds", "r1": _pct(f["recall_at"]["1"]),
-                "r2": _pct(f["recall_at"]["2"]), "r3": _pct(f["recall_at"]["3"]), "r46": _pct(f["recall_4_6"]),
+    anchors = [{"monitor": f"ours: {record['monitor']['score']}, thresholds from other runs",
+                "r1": _pct(f["recall_at"]["1"]), "r2": _pct(f["recall_at"]["2"]), "r3": _pct(f["recall_at"]["3"]),
+                "r46": _pct(f["recall_4_6"]),
                 "f3": f"{f['f3_1_3']:.2f}"}]
     anchors += [{"monitor": f"{a.monitor} (published, in-sample)", "r1": _pct(a.recall_1), "r2": _pct(a.recall_2),
                  "r3": _pct(a.recall_3), "r46": "77.0 %" if a.monitor.startswith("SelfOracle") else "-",
