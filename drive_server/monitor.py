@@ -115,17 +115,20 @@ class MonitorPolicy:
     mode: MonitorMode = MonitorMode.WARN
     slow_factor: float = 0.5  # on a warning (act), the control law's speed limit times this
     release_frames: int = FRAMES_PER_SECOND  # frames below the warning threshold before handing back
-    budget_ms: float = 5.0  # a monitor slower than this on ``strikes`` frames in a row is switched off
-    strikes: int = 3
+    # a monitor slower than this on ``strikes`` of the last second's frames is switched off (a slow
+    # monitor must not hold up the simulator); None: no budget, for tools that run on simulated time, where a
+    # slow frame delays nobody and a busy machine must not change the figures
+    budget_ms: float | None = 5.0
+    strikes: int = 12
 
     def __post_init__(self) -> None:
         if not 0.0 < self.slow_factor <= 1.0:
             raise BadValue(f"monitor slow factor must be above 0 and at most 1, got {self.slow_factor}")
         if self.release_frames < 1:
             raise BadValue(f"monitor release frames must be >= 1, got {self.release_frames}")
-        if not self.budget_ms > 0 or self.strikes < 1:
-            raise BadValue(f"monitor budget must be > 0 ms with >= 1 strike, got {self.budget_ms} ms, "
-                           f"{self.strikes}")
+        if (self.budget_ms is not None and not self.budget_ms > 0) or not 1 <= self.strikes <= FRAMES_PER_SECOND:
+            raise BadValue(f"monitor budget must be > 0 ms (or none) with 1..{FRAMES_PER_SECOND} strikes, got "
+                           f"{self.budget_ms} ms, {self.strikes}")
 
 
 class MonitorFault(RuntimeError):
@@ -233,7 +236,7 @@ class ClientMonitor:
     def __init__(self, graph: MonitorGraph, spec: MonitorSpec, policy: MonitorPolicy, who: str = "") -> None:
         self.graph, self.state, self.policy, self.who = graph, MonitorState(spec, policy), policy, who
         self.failed: str | None = None  # why it was switched off
-        self._slow = 0
+        self._slow: deque[bool] = deque(maxlen=FRAMES_PER_SECOND)  # which of the last second's frames ran over
         self.last: MonitorReading | None = None
         self.seconds = 0.0  # time spent in the monitor, for the stage timings
 
@@ -250,10 +253,13 @@ class ClientMonitor:
             return None
         finally:
             self.seconds = perf_counter() - t0
-        self._slow = self._slow + 1 if self.seconds * 1000 > self.policy.budget_ms else 0
-        if self._slow >= self.policy.strikes:
-            self._fail(f"over its budget of {self.policy.budget_ms:g} ms on {self._slow} frames in a row")
-            return None
+        budget = self.policy.budget_ms
+        if budget is not None:
+            self._slow.append(self.seconds * 1000 > budget)
+            if sum(self._slow) >= self.policy.strikes:
+                self._fail(f"over its budget of {budget:g} ms on {sum(self._slow)} of the last {len(self._slow)} "
+                           "frames")
+                return None
         self.last = reading
         if reading.level != before:  # at most one line per release_frames frames: the state is held that long
             who = f"client {self.who}: " if self.who else ""

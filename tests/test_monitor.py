@@ -297,3 +297,31 @@ def test_rbc_monitor_fit_attaches_a_calibrated_monitor_and_leaves_steering_alone
                  str(shift)]) == 0
     assert SteeringModel(shift).monitor()[0].score == "shift"
     assert main(["monitor", "fit", str(src), "--calibration", str(calib), "--out", str(tmp_path / "x.onnx")]) == 2
+
+
+def test_a_busy_moment_does_not_switch_the_monitor_off_and_offline_tools_have_no_budget():
+    """One slow frame is a hiccup; most of a second over budget is a slow monitor. Tools on simulated time (sim,
+    drive-log, the benchmark, the env) run without a budget, so a busy machine cannot change their figures (it
+    switched the monitor off in a quarter of the first benchmark's runs)."""
+    slow = _Broken("slow")  # 10 ms a frame
+    hiccup = ClientMonitor(_Flaky(), SPEC, MonitorPolicy(budget_ms=5.0))
+    for _ in range(30):
+        assert hiccup.observe(np.zeros(1)) is not None
+    monitor = ClientMonitor(slow, SPEC, MonitorPolicy(budget_ms=5.0))
+    readings = [monitor.observe(np.zeros(1)) for _ in range(15)]
+    assert monitor.failed and readings.count(None) == 4  # off at the 12th slow frame of the last 15
+    unbudgeted = ClientMonitor(slow, SPEC, MonitorPolicy(budget_ms=None))
+    assert all(unbudgeted.observe(np.zeros(1)) is not None for _ in range(20)) and not unbudgeted.failed
+
+
+class _Flaky:
+    """Slow on every 5th frame only."""
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def score(self, x: np.ndarray) -> float:
+        self.n += 1
+        if self.n % 5 == 0:
+            time.sleep(0.01)
+        return 0.0

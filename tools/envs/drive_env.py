@@ -219,7 +219,7 @@ class DriveEnv(gym.Env):
         from drive_server.monitor import MonitorPolicy
         from drive_server.pipeline import DriveConfig, DrivePipeline
 
-        pipeline = DrivePipeline(SteeringModel(Path(path)), DriveConfig(monitor=MonitorPolicy()))
+        pipeline = DrivePipeline(SteeringModel(Path(path)), DriveConfig(monitor=MonitorPolicy(budget_ms=None)))
         if pipeline.monitor_spec is None:
             raise BadValue(f"monitor={path}: the model file carries no misbehaviour monitor",
                            "attach one with rbc monitor fit")

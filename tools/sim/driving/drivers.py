@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -135,8 +135,11 @@ class OnnxDriver(LocalDriver):
         super().__init__()
         model = SteeringModel(Path(model_path), InferenceConfig(threads=threads))
         model.warm_up()
+        # a monitor runs without a time budget here: the simulator waits for every frame, so a busy machine must
+        # not switch it off and change a run
+        policy = replace(monitor, budget_ms=None) if monitor else MonitorPolicy(mode=MonitorMode.OFF)
         self.pipeline = DrivePipeline(model, DriveConfig(law=law or ControlLaw(), speed_unit=SpeedUnit(speed_unit),
-                                                         monitor=monitor or MonitorPolicy(mode=MonitorMode.OFF)))
+                                                         monitor=policy))
         self.smoother = self.pipeline.smoother()  # one driver is one client: smoothed as the model asks
         self.monitor = self.pipeline.client_monitor()  # None: no monitor in the file, or off
         self.readings: list[tuple[float, MonitorReading | None]] = []  # (frame time, reading) with a monitor
