@@ -188,7 +188,7 @@ def test_a_broken_monitor_is_one_line_and_off_still_serves(models, tmp_path):
         with pytest.raises(MonitorError, match=problem):
             SteeringModel(path).monitor()
         DrivePipeline(SteeringModel(path), DriveConfig(monitor=MonitorPolicy(mode=MonitorMode.OFF)))
-    done = run_server_cli("--model", str(garbage), "--port", "0")
+    done = run_server_cli("--model", str(garbage), "--port", "0", "--monitor", "warn")
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "cannot be loaded" in done.stderr and "--monitor off" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1

@@ -141,7 +141,7 @@ def test_rbc_sim_sums_up_the_monitor_and_draws_its_score(tmp_path):
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert main(["sim", "--model", str(model), "--track", track, "--max-lap-time", "40",
+        assert main(["sim", "--model", str(model), "--track", track, "--max-lap-time", "40", "--monitor", "warn",
                      "--monitor-plot", str(plot)]) == 0
     text = out.getvalue()
     assert "monitor brightness (warn): 1 warning(s), 0 alarm(s)" in text and "foreseen:" in text

@@ -25,13 +25,14 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
     """
     if model is not None:
         from drive_server.model import SteeringModel
-        from drive_server.monitor import MonitorPolicy
+        from drive_server.monitor import MonitorMode, MonitorPolicy
         from drive_server.pipeline import DriveConfig, DrivePipeline
 
         # the monitor as --monitor warn, without a time budget: the loop runs on the log's clock, so a busy
         # machine must not switch it off and change the figures
         pipeline = DrivePipeline(SteeringModel(Path(model)),
-                                 DriveConfig(smoothing=smooth, monitor=MonitorPolicy(budget_ms=None)))
+                                 DriveConfig(smoothing=smooth,
+                                             monitor=MonitorPolicy(MonitorMode.WARN, budget_ms=None)))
         smoother = pipeline.smoother()
         monitor = pipeline.client_monitor()  # the model's misbehaviour monitor, if its file carries one (warn)
 

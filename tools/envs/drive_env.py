@@ -216,10 +216,11 @@ class DriveEnv(gym.Env):
         if path is None:
             return None, None
         from drive_server.model import SteeringModel
-        from drive_server.monitor import MonitorPolicy
+        from drive_server.monitor import MonitorMode, MonitorPolicy
         from drive_server.pipeline import DriveConfig, DrivePipeline
 
-        pipeline = DrivePipeline(SteeringModel(Path(path)), DriveConfig(monitor=MonitorPolicy(budget_ms=None)))
+        pipeline = DrivePipeline(SteeringModel(Path(path)), DriveConfig(monitor=MonitorPolicy(MonitorMode.WARN,
+                                                                                                   budget_ms=None)))
         if pipeline.monitor_spec is None:
             raise BadValue(f"monitor={path}: the model file carries no misbehaviour monitor",
                            "attach one with rbc monitor fit")
