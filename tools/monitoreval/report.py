@@ -77,13 +77,13 @@ def closed_loop(results: Sequence[tuple[RunSpec, str, dict[str, Any]]]) -> dict[
     return out
 
 
-def replayed(spec: RunSpec, run: dict[str, Any], name: str, monitor: MonitorSpec) -> RunTrace:
-    """A shadow monitor's trace: its per-frame scores through the server's own state machine, with its
-    thresholds (``monitor``: its MonitorSpec)."""
+def replayed(spec: RunSpec, run: dict[str, Any], values: Sequence[float], monitor: MonitorSpec) -> RunTrace:
+    """``run``'s trace had ``monitor`` (its thresholds and window) seen these per-frame ``values``: the values
+    through the server's own state machine."""
     from drive_server.monitor import MonitorState
 
     state = MonitorState(monitor)
-    levels = np.array([int(state.update(v).level) for v in run["shadows"][name]], dtype=np.uint8)
+    levels = np.array([int(state.update(v).level) for v in values], dtype=np.uint8)
     base = trace(spec, run)
     return RunTrace(base.name, base.group, base.t, levels, base.takeovers, base.sim_time_s, base.meta)
 
@@ -97,7 +97,7 @@ def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
     out = []
     labels = labels or {}
     for name, traces in [(primary, [trace(s, r) for s, r in warn]),
-                         *[(labels.get(n, n), [replayed(s, r, n, spec) for s, r in warn])
+                         *[(labels.get(n, n), [replayed(s, r, r["shadows"][n], spec) for s, r in warn])
                            for n, spec in shadows.items()]]:
         f = score(traces, rules)
         out.append({"monitor": name, "r1": _pct(f.recall_at["1"]), "r2": _pct(f.recall_at["2"]),
@@ -108,18 +108,15 @@ def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
 
 
 def _at_threshold(spec: RunSpec, run: dict[str, Any], name: str | None, warn: float, window: int) -> RunTrace:
-    """A run's trace had the monitor warned from ``warn`` on (the server's state machine; alarms not counted):
-    the driving monitor's stored one-second means, or a shadow's stored scores through the window."""
-    from drive_server.monitor import MonitorSpec, MonitorState
+    """A run's trace had the monitor warned from ``warn`` on (alarms not counted): the driving monitor's stored
+    one-second means (a window of 1), or a shadow's stored scores through its window."""
+    from drive_server.monitor import MonitorSpec
 
     if name is None:
-        values, spec_window = [m if m is not None else 0.0 for m in run["mean"]], 1  # already one-second means
+        values, spec_window = [m if m is not None else 0.0 for m in run["mean"]], 1
     else:
         values, spec_window = run["shadows"][name], window
-    state = MonitorState(MonitorSpec("sweep", warn, max(warn, 1e30), spec_window))
-    levels = np.array([int(state.update(v).level) for v in values], dtype=np.uint8)
-    base = trace(spec, run)
-    return RunTrace(base.name, base.group, base.t, levels, base.takeovers, base.sim_time_s, base.meta)
+    return replayed(spec, run, values, MonitorSpec("sweep", warn, max(warn, 1e30), spec_window))
 
 
 def sweep(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: ScoringRules,
