@@ -32,6 +32,10 @@ API_MARKER = "<!-- generated: api -->"
 MODELS_MARKER = "<!-- generated: models -->"
 #: Width of the help texts (argparse wraps to the terminal; the page must not depend on the builder's).
 HELP_COLUMNS = 80
+#: The widest line of a code block on the site (tests/test_docs_layout.py): a longer signature is split.
+CODE_COLUMNS = 100
+#: A dataclass default longer than this is shown as ``Name(...)`` (its fields are on its own entry).
+SIGNATURE_DEFAULT_CHARS = 40
 
 #: The public Python entry points, in the order a user meets them: ``module:name``.
 API: tuple[str, ...] = (
@@ -105,12 +109,45 @@ def _entry(path: str) -> str:
             kind = field.type if isinstance(field.type, str) else getattr(field.type, "__name__", str(field.type))
             lines.append(f"| `{field.name}` | `{kind.replace(' | ', ' or ')}` | {default} |")
         return "\n".join([*lines, ""])
-    try:
-        signature = str(inspect.signature(obj))
-    except (TypeError, ValueError):
-        signature = "(...)"
     kind = "class" if inspect.isclass(obj) else "def"
-    return "\n".join([*lines, "```python", f"{kind} {name}{signature}", "```", "", doc, ""])
+    return "\n".join([*lines, "```python", _signature(obj, f"{kind} {name}"), "```", "", doc, ""])
+
+
+def _parameter(p: inspect.Parameter) -> str:
+    """A parameter as written in code: annotations unquoted, a long dataclass default as ``Name(...)``."""
+    stars = "*" if p.kind is p.VAR_POSITIONAL else "**" if p.kind is p.VAR_KEYWORD else ""
+    text = stars + p.name
+    if p.annotation is not p.empty:
+        text += ": " + (p.annotation if isinstance(p.annotation, str) else inspect.formatannotation(p.annotation))
+    if p.default is not p.empty:
+        default = repr(p.default)
+        if len(default) > SIGNATURE_DEFAULT_CHARS and dataclasses.is_dataclass(p.default):
+            default = f"{type(p.default).__name__}(...)"
+        text += (" = " if p.annotation is not p.empty else "=") + default
+    return text
+
+
+def _signature(obj: object, head: str) -> str:
+    """``head(parameters) -> returns`` on one line where it fits :data:`CODE_COLUMNS`, else a parameter a line."""
+    try:
+        sig = inspect.signature(obj)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return f"{head}(...)"
+    parts: list[str] = []
+    params = list(sig.parameters.values())
+    for k, p in enumerate(params):
+        if p.kind is p.KEYWORD_ONLY and (k == 0 or params[k - 1].kind not in (p.KEYWORD_ONLY, p.VAR_POSITIONAL)):
+            parts.append("*")
+        parts.append(_parameter(p))
+        if p.kind is p.POSITIONAL_ONLY and (k + 1 == len(params) or params[k + 1].kind is not p.POSITIONAL_ONLY):
+            parts.append("/")
+    returns = sig.return_annotation
+    tail = "" if returns is sig.empty or inspect.isclass(obj) else " -> " + (
+        returns if isinstance(returns, str) else inspect.formatannotation(returns))
+    one_line = f"{head}({', '.join(parts)}){tail}"
+    if len(one_line) <= CODE_COLUMNS:
+        return one_line
+    return "\n".join([f"{head}(", *(f"    {part}," for part in parts), f"){tail}"])
 
 
 def api_markdown() -> str:

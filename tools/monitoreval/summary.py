@@ -33,14 +33,15 @@ def monitor_summary(driver: OnnxDriver, result: RunResult, rules: ScoringRules =
     trace = run_trace(driver, result)
     found = first_warning_leads(trace, rules)
     foreseen = [x for x in found if x[2] is not None]
-    text = (f"monitor {spec.score} ({driver.pipeline.config.monitor.mode.value}): {state.episodes['warning']} "
-            f"warning(s), {state.episodes['alarm']} alarm(s); take-overs for leaving the road, a cone or a spin-out "
-            f"foreseen: {len(foreseen)} of {len(found)}")
+    head = (f"monitor {spec.score} ({driver.pipeline.config.monitor.mode.value}): {state.episodes['warning']} "
+            f"warning(s), {state.episodes['alarm']} alarm(s)")
+    if monitor.failed:
+        head += f"; switched off: {monitor.failed}"
+    # the take-overs a monitor can foresee: off the road, into a cone, a spin-out (MISBEHAVIOUR_CAUSES)
+    text = f"take-overs foreseen: {len(foreseen)} of {len(found)}"
     if foreseen:
         text += " (lead " + ", ".join(f"{lead:.1f} s" for *_, lead in foreseen) + ")"
-    if monitor.failed:
-        text += f"; switched off: {monitor.failed}"
     skipped = sum(1 for _, c in trace.takeovers if c in MISBEHAVIOUR_CAUSES) - len(found)
     if skipped:
-        text += f"; {skipped} more within {rules.settle_s:g} s of the previous take-over"
-    return text
+        text += f"; {skipped} more within {rules.settle_s:g} s of the one before"
+    return f"{head}\n{text}"
