@@ -53,11 +53,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="steering limit in degrees: scales the model's -1..1 output (delta of Eq. 14; "
                         "default %(default)s)")
     p.add_argument("--tau", type=float, default=law.tau,
-                   help="gain of the throttle/brake law, 0..1 (tau of Eq. 14; default %(default)s)")
+                   help="how hard the throttle/brake law answers, 0..1 (tau of Eq. 14; default %(default)s)")
     p.add_argument("--smooth", dest="smoothing", type=float, default=drive.smoothing, metavar="ALPHA",
                    help="smooth each client's steering over time: every frame sends ALPHA of the model's new output "
                         "and 1 - ALPHA of that client's last command, 0 < ALPHA <= 1, 1: off (default: what the "
                         "model's metadata asks for, 0.5 for the bundled unity.onnx; off for a model without)")
+    p.add_argument("--gain", type=float, default=drive.gain, metavar="G",
+                   help="multiply the network's steering by G (0.1..2) before it is clamped, smoothed and sent "
+                        "(default: what the model's metadata asks for, 1.5 for the bundled unity.onnx; 1 for a "
+                        "model without)")
     p.add_argument("--speed-unit", "--telemetry-speed-unit", dest="telemetry_speed_unit",
                    choices=[u.value for u in SpeedUnit], default=drive.speed_unit.value,
                    help="unit of the telemetry speed: mph like the stock Udacity simulator, or kmh like the paper's")
@@ -144,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         drive = DriveConfig(law=ControlLaw(speed_limit_kmh=args.speed_limit, steer_limit_deg=args.steer_limit,
                                            tau=args.tau),
-                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smoothing=args.smoothing,
+                            speed_unit=SpeedUnit(args.telemetry_speed_unit), smoothing=args.smoothing, gain=args.gain,
                             monitor=MonitorPolicy(mode=MonitorMode(args.monitor), slow_factor=args.monitor_slow))
         inference = InferenceConfig(threads=args.threads, provider=args.provider)
         fallback = FallbackPolicy(hold_frames=args.hold_frames)
@@ -192,8 +196,10 @@ def main(argv: list[str] | None = None) -> int:
                           dashboard=_dashboard_wanted(args, sock))
     log.info("model %s", model.describe())
     smooth, whose = (model.smoothing, "the model's") if drive.smoothing is None else (drive.smoothing, "--smooth")
-    log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s%s",
-             drive.law.speed_limit_kmh, drive.law.steer_limit_deg, drive.law.tau, drive.speed_unit.value,
+    gain, gain_whose = (model.gain, "the model's") if drive.gain is None else (drive.gain, "--gain")
+    log.info("control: speed limit %.1f km/h, steer limit %.1f deg, tau %.2f, telemetry speed in %s, "
+             "steering gain %g (%s)%s", drive.law.speed_limit_kmh, drive.law.steer_limit_deg, drive.law.tau,
+             drive.speed_unit.value, gain, gain_whose,
              f", steering smoothed per client (alpha {smooth:g}, {whose})" if smooth < 1 else "")
     if monitor_found is not None:
         spec = monitor_found[0]

@@ -16,7 +16,7 @@ import onnxruntime as ort
 
 from drive_server.contract import METADATA_KEY, ContractError, PreprocessContract, infer_contract
 from drive_server.monitor import MonitorGraph, MonitorSpec, read_monitor
-from drive_server.smoothing import SERVING_KEY, serving_alpha
+from drive_server.serving import SERVING_KEY, Serving
 from protocol.errors import BadValue, UserError
 
 log = logging.getLogger(__name__)
@@ -89,10 +89,11 @@ class SteeringModel:
         self.input_name, self.output_name = inp.name, outputs[0].name
         self.input_shape = tuple(inp.shape)
         self.contract, self.contract_source = self._contract()
-        try:  # the steering smoothing the model was measured with (drive_server.smoothing; 1: none)
-            self.smoothing = serving_alpha(self._session.get_modelmeta().custom_metadata_map.get(SERVING_KEY))
+        try:  # the steering gain and smoothing the model was measured with (drive_server.serving)
+            self.serving = Serving.from_json(self._session.get_modelmeta().custom_metadata_map.get(SERVING_KEY))
         except ValueError as exc:
             raise ModelError(f"{path.name}: {exc}") from None
+        self.smoothing, self.gain = self.serving.smoothing, self.serving.gain
         self._outputs = [self.output_name]
         self._monitor: tuple[MonitorSpec, MonitorGraph] | None = None
         self._monitor_read = False
@@ -122,7 +123,8 @@ class SteeringModel:
         return contract, "metadata"
 
     def predict(self, x: np.ndarray) -> float:
-        """Normalised steering (-1..1 for a trained model) for one preprocessed input batch of 1."""
+        """The network's normalised steering (-1..1 for a trained model) for one preprocessed input batch of 1,
+        before the serving gain (``DrivePipeline`` applies it)."""
         out = self._session.run(self._outputs, {self.input_name: x})[0]
         return float(out.reshape(-1)[0])
 
@@ -160,4 +162,4 @@ class SteeringModel:
                 f"crop {self.contract.crop_top}..{self.contract.crop_bottom}"
                 + (f" decode 1/{self.contract.decode_reduce}" if self.contract.decode_reduce else "")
                 + (f" edges {self.contract.blank_columns} blanked" if self.contract.blank_columns else "")
-                + (f", serving: steering smoothed (alpha {self.smoothing:g})" if self.smoothing < 1 else ""))
+                + (f", serving: {self.serving.describe()}" if self.serving.asks_anything else ""))

@@ -24,6 +24,7 @@ from drive_server.monitor import (
     act_on,
 )
 from drive_server.preprocess import jpeg_reduction, preprocess
+from drive_server.serving import check_gain
 from drive_server.smoothing import OFF, SteeringSmoother, check_alpha
 from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
 from protocol.errors import UserError
@@ -35,18 +36,22 @@ class InferenceError(UserError, RuntimeError):
 
 @dataclass(frozen=True)
 class DriveConfig:
-    """The control law (Eq. 14), the unit of the telemetry speed (mph: the stock simulator) and the weight of each
-    new output in the per-client smoothing of the steering (``drive_server.smoothing``; 1: off; None: what the
-    model's metadata asks for, off for a model without)."""
+    """The control law (Eq. 14), the unit of the telemetry speed (mph: the stock simulator), the gain on the
+    network's steering and the weight of each new output in the per-client smoothing of the steering
+    (``drive_server.serving``; None: what the model's metadata asks for, gain 1 and smoothing off for a model
+    without)."""
 
     law: ControlLaw = ControlLaw()
     speed_unit: SpeedUnit = SpeedUnit.MPH
     smoothing: float | None = None
+    gain: float | None = None
     monitor: MonitorPolicy = MonitorPolicy()  # what is done with the model's monitor, if it carries one
 
     def __post_init__(self) -> None:
         if self.smoothing is not None:
             check_alpha(self.smoothing)
+        if self.gain is not None:
+            check_gain(self.gain)
 
 
 class DrivePipeline:
@@ -59,6 +64,7 @@ class DrivePipeline:
         self.contract = model.contract
         self.reduce = jpeg_reduction(model.contract)
         self.smoothing = model.smoothing if config.smoothing is None else config.smoothing
+        self.gain = model.gain if config.gain is None else config.gain
         self._slow_laws: dict[float, ControlLaw] = {}
         found = model.monitor() if config.monitor.mode != "off" else None
         self.monitor_spec: MonitorSpec | None = found[0] if found is not None else None
@@ -76,20 +82,20 @@ class DrivePipeline:
 
     def steer(self, rgb: np.ndarray, smoother: SteeringSmoother | None = None,
               monitor: ClientMonitor | None = None) -> float:
-        """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``), smoothed by the
-        client's ``smoother`` (:meth:`smoother`) if given; ``monitor`` scores the same input (``monitor.last``)."""
+        """Normalised steering (-1..1) for one RGB frame (full size or decoded at 1/``reduce``): the network's
+        answer times the gain, smoothed by the client's ``smoother`` (:meth:`smoother`) if given; ``monitor``
+        scores the same input (``monitor.last``)."""
         x = preprocess(rgb, self.contract)
         steering = self._usable(self.model.predict(x))
         if monitor is not None:
             monitor.observe(x)
         return smoother(steering) if smoother is not None else steering
 
-    @staticmethod
-    def _usable(value: float) -> float:
-        """The model's output as a steering command: finite, clamped to -1..1."""
+    def _usable(self, value: float) -> float:
+        """The network's output as a steering command: finite, times the serving gain, clamped to -1..1."""
         if not math.isfinite(value):
             raise InferenceError(f"model output is not finite: {value!r}")
-        return max(-1.0, min(1.0, value))
+        return max(-1.0, min(1.0, value * self.gain))
 
     def control(self, steering: float, speed: float, reading: MonitorReading | None = None) -> SteerCommand:
         """Eq. 14 on the predicted steering (converted to degrees) and the telemetry speed; with ``--monitor act``

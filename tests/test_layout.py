@@ -112,7 +112,8 @@ def test_models_never_import_tools():
 SERVING_CONTRACT = {
     "drive_server.contract": "the preprocessing contract and the ONNX metadata keys it travels under",
     "drive_server.preprocess": "THE preprocessing function: training feeds the network the pixels serving does",
-    "drive_server.smoothing": "the steering smoothing's name and its metadata (rbc.serving) that a model carries",
+    "drive_server.smoothing": "the steering smoothing's name and range that a model asks for",
+    "drive_server.serving": "how a model asks to be served (rbc.serving: its gain and smoothing)",
     "drive_server.monitor": "the monitor's spec, metadata keys and one-second window that a model file carries",
     "drive_server.model": "the server's model loader: the monitor's fit and attach read a model back as it is served",
 }

@@ -59,7 +59,7 @@ def test_bad_models_and_paths_are_one_line(tmp_path: Path, capsys: pytest.Captur
              ([str(tmp_path / "missing.onnx"), "--out", str(tmp_path / "z.onnx")], "no model at"),
              ([str(original), "--out", str(original)], "must not be the model itself"),
              ([str(original), "--out", str(tmp_path / "w.onnx"), "--serve-smooth", "0"], "above 0"),
-             ([str(original), "--out", str(tmp_path / "v.onnx"), "--output-scale", "3"], "output scale must be 0.1..2")]
+             ([str(original), "--out", str(tmp_path / "v.onnx"), "--gain", "3"], "steering gain must be 0.1..2")]
     capsys.readouterr()
     for argv, says in cases:
         assert rbc(["mirror", *argv]) == 2
@@ -69,20 +69,30 @@ def test_bad_models_and_paths_are_one_line(tmp_path: Path, capsys: pytest.Captur
     assert not (tmp_path / "v.onnx").exists()
 
 
-def test_a_model_trained_elsewhere_is_mirrored_and_scaled_as_rbc_train_would_export_it(tmp_path: Path) -> None:
-    """``--output-scale S``: S (f(x) - f(mirror x)) / 2, recorded, so a model whose run is gone gets the recipe's
-    scale too (before, only re-exporting from a training checkpoint could scale one)."""
+def test_a_model_trained_elsewhere_is_mirrored_with_a_serving_gain_as_rbc_train_would_export_it(
+        tmp_path: Path) -> None:
+    """``--gain G``: the graph answers (f(x) - f(mirror x)) / 2 and the file asks drive_server for G, as a recipe's
+    ``[export] gain``; served through the pipeline, the answer is G times the average (the old ``--output-scale``
+    spelling gives the same file). A gain the source asks for is kept."""
+    from drive_server.pipeline import DriveConfig, DrivePipeline
+
     original = build_shallow(tmp_path / "m.onnx", seed=3)
-    plain, scaled = tmp_path / "plain.onnx", tmp_path / "scaled.onnx"
+    plain, gained, old = tmp_path / "plain.onnx", tmp_path / "gained.onnx", tmp_path / "old.onnx"
     assert rbc(["mirror", str(original), "--out", str(plain)]) == 0
-    assert rbc(["mirror", str(original), "--out", str(scaled), "--output-scale", "0.8"]) == 0
+    assert rbc(["mirror", str(original), "--out", str(gained), "--gain", "0.8"]) == 0
+    assert rbc(["mirror", str(original), "--out", str(old), "--output-scale", "0.8"]) == 0
     x = np.random.default_rng(2).random((5, *SteeringModel(original).contract.input_shape[1:]), dtype=np.float32)
-    assert np.allclose(_run(scaled, x - 0.5), 0.8 * _run(plain, x - 0.5), atol=1e-6)
+    assert np.allclose(_run(gained, x - 0.5), _run(plain, x - 0.5), atol=1e-6)  # the graph is the network's
+    assert SteeringModel(gained).gain == SteeringModel(old).gain == pytest.approx(0.8)
+    assert SteeringModel(plain).gain == 1.0
+    frame = np.random.default_rng(5).integers(0, 255, (160, 320, 3), dtype=np.uint8)
+    served, network = DrivePipeline(SteeringModel(gained)), DrivePipeline(SteeringModel(gained), DriveConfig(gain=1.0))
+    assert served.steer(frame) == pytest.approx(max(-1.0, min(1.0, 0.8 * network.steer(frame))), abs=1e-6)
     import onnxruntime
 
-    info = json.loads(onnxruntime.InferenceSession(str(scaled)).get_modelmeta().custom_metadata_map[
+    info = json.loads(onnxruntime.InferenceSession(str(gained)).get_modelmeta().custom_metadata_map[
         METADATA_MODEL_INFO_KEY])
-    assert info["output_scale"] == pytest.approx(0.8) and info["mirror_average"] is True
+    assert info["gain"] == pytest.approx(0.8) and info["mirror_average"] is True and "output_scale" not in info
 
 
 def test_a_lane_keeping_model_is_not_mirrored_nor_trained_mirrored(tmp_path: Path,

@@ -277,7 +277,7 @@ def test_laps_is_the_unity_recipe_without_road_files_many_recordings_or_the_jung
     laps, unity = recipe_sections(load_recipe("laps")), recipe_sections(load_recipe("unity"))
     differ = {(s, k) for s in SECTIONS for k in SECTIONS[s] if laps[s][k] != unity[s][k]}
     assert differ == {("augmentation", "edge_gain"), ("augmentation", "edge_margin"), ("data", "balance_recordings"),
-                      ("augmentation", "offset_aug"), ("augmentation", "offset_range"), ("export", "output_scale")}
+                      ("augmentation", "offset_aug"), ("augmentation", "offset_range"), ("export", "gain")}
     assert laps["augmentation"]["edge_gain"] == 0.0 and not laps["data"]["balance_recordings"]
     assert laps["augmentation"]["offset_aug"] == 0.0 and unity["augmentation"]["offset_aug"] == 0.5
 
@@ -368,7 +368,7 @@ def test_a_bundled_models_recipe_gives_what_its_onnx_file_records(name) -> None:
     full = resolved(config)
     recorded = {"arch": info["arch"], "behavior": info["behavior"], "approach": info["approach"], "seed": info["seed"],
                 "epochs": info["epochs"], "split": info.get("split", "random"), "export": info.get("export", "last"),
-                "mirror_average": info.get("mirror_average", False), "output_scale": info.get("output_scale", 1.0),
+                "mirror_average": info.get("mirror_average", False), "gain": info.get("gain", info.get("output_scale", 1.0)),
                 "smoothing": info.get("serve_smooth", 1.0)}
     assert {k: getattr(full, k) for k in recorded} == recorded
     assert PreprocessContract.from_json(meta[METADATA_KEY]) == config.pipeline().contract

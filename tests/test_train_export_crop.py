@@ -14,7 +14,7 @@ ort = pytest.importorskip("onnxruntime")
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract  # noqa: E402
 from drive_server.model import SteeringModel  # noqa: E402
-from drive_server.pipeline import DrivePipeline  # noqa: E402
+from drive_server.pipeline import DriveConfig, DrivePipeline  # noqa: E402
 from drive_server.preprocess import to_input_tensor  # noqa: E402
 from models.data.framecache import build_cache, load_frame  # noqa: E402
 from models.networks.nets import ContractInput, build_model  # noqa: E402
@@ -110,23 +110,34 @@ def test_mirror_average_and_smoothing_are_exported_and_recorded(tmp_path: Path) 
     record = json.loads((result.run_dir / "config.json").read_text())
     assert meta["mirror_average"] is True and record["config"]["mirror_average"] is True
     assert SteeringModel(result.onnx).smoothing == 0.5 and record["config"]["smoothing"] == meta["smoothing"] == 0.5
-    assert record["recipe"]["export"] == meta["recipe"]["export"] == {"mirror_average": True, "output_scale": 1.0,
+    assert record["recipe"]["export"] == meta["recipe"]["export"] == {"mirror_average": True, "gain": 1.0,
                                                                       "smoothing": 0.5}
 
 
-def test_output_scale_multiplies_what_is_exported_and_is_recorded(tmp_path: Path) -> None:
-    result = train(_config(tmp_path / "scaled", epochs=1, max_steps_per_epoch=2, export="last", mirror_average=True,
-                           output_scale=0.8))
-    x, mirrored, plain, plain_mirrored = _frames_and_network_outputs(result)
-    want = 0.8 * 0.5 * (plain - plain_mirrored)
-    assert np.abs(want).max() > 1e-3
-    assert np.abs(_onnx_outputs(result.onnx, x) - want).max() < 1e-4
-    meta = json.loads(ort.InferenceSession(str(result.onnx)).get_modelmeta().custom_metadata_map[
-        METADATA_MODEL_INFO_KEY])
+def test_the_gain_is_a_serving_setting_the_network_and_its_validation_figures_are_without_it(tmp_path: Path) -> None:
+    """#52: the recipe's gain goes into the file's serving metadata, not the graph: the ONNX output and the run's
+    validation figures are the network's own prediction of the driver; drive_server's pipeline multiplies it."""
+    config = dict(epochs=1, max_steps_per_epoch=2, export="last", mirror_average=True)
+    result = train(_config(tmp_path / "gained", **config, gain=1.5))
+    plain = train(_config(tmp_path / "plain", **config))
+    x, mirrored, net, net_mirrored = _frames_and_network_outputs(result)
+    assert np.abs(_onnx_outputs(result.onnx, x) - 0.5 * (net - net_mirrored)).max() < 1e-4  # no gain in the graph
+    assert np.allclose(_onnx_outputs(result.onnx, x), _onnx_outputs(plain.onnx, x), atol=1e-6)
+    assert json.dumps(result.info["metrics"]) == json.dumps(plain.info["metrics"])  # open loop: the network's
+    meta = ort.InferenceSession(str(result.onnx)).get_modelmeta().custom_metadata_map
     record = json.loads((result.run_dir / "config.json").read_text())
-    assert meta["output_scale"] == 0.8 and record["config"]["output_scale"] == 0.8
-    with pytest.raises(ValueError, match="output scale"):
-        _config(tmp_path / "bad", output_scale=0.0)
+    assert json.loads(meta["rbc.serving"]) == {"gain": 1.5}
+    assert json.loads(meta[METADATA_MODEL_INFO_KEY])["gain"] == 1.5 and record["config"]["gain"] == 1.5
+    frame = np.random.default_rng(1).integers(0, 255, (160, 320, 3), dtype=np.uint8)
+    served = DrivePipeline(SteeringModel(result.onnx)).steer(frame)
+    network = DrivePipeline(SteeringModel(result.onnx), DriveConfig(gain=1.0)).steer(frame)
+    assert served == pytest.approx(max(-1.0, min(1.0, 1.5 * network)), abs=1e-6)
+    with pytest.raises(ValueError, match="steering gain"):
+        _config(tmp_path / "bad", gain=0.0)
+    old = json.loads((plain.run_dir / "config.json").read_text())["config"]
+    del old["gain"]
+    old["output_scale"] = 1.2  # a run stored when the gain was multiplied into the graph
+    assert TrainConfig.from_dict(old).gain == 1.2
 
 
 def test_inspect_scores_validation_frames_only_and_says_so(tmp_path: Path, capsys) -> None:

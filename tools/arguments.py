@@ -37,6 +37,24 @@ def add_smooth_argument(parser: argparse.ArgumentParser) -> None:
                              "what the model's metadata asks for, as drive_server; off for a model without)")
 
 
+def add_gain_argument(parser: argparse.ArgumentParser) -> None:
+    """``--gain G``: the model's steering multiplied as ``drive_server --gain`` does."""
+    parser.add_argument("--gain", type=float, default=None, metavar="G",
+                        help="multiply the model's steering by G (0.1..2) as drive_server --gain does (default: what "
+                             "the model's metadata asks for, as drive_server; 1 for a model without)")
+
+
+def serving_gain(args: argparse.Namespace) -> float | None:
+    """The ``--gain`` value (None: the model's own), or a CommandError in one line."""
+    from drive_server.serving import check_gain
+    from tools.errors import CommandError
+
+    try:
+        return None if args.gain is None else check_gain(args.gain)
+    except ValueError as exc:
+        raise CommandError(f"--gain: {exc}") from None
+
+
 def add_loop_rule_arguments(parser: argparse.ArgumentParser) -> None:
     """``--lane``, ``--max-offset``, ``--handback``: when a person takes over in the closed loop on a recording
     (``rbc drive-log``, ``rbc data crossval``) and how long they drive; defaults and ranges are ``LoopRules``'."""

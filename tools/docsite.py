@@ -161,21 +161,24 @@ def models_markdown() -> str:
     import onnxruntime as ort
 
     from drive_server.models_dir import bundled_models
-    from drive_server.smoothing import OFF, SERVING_KEY, serving_alpha
+    from drive_server.serving import NO_GAIN, SERVING_KEY, Serving
+    from drive_server.smoothing import OFF
 
     lines = ["| model | network (parameters) | behavior, approach | camera rig | training samples | answer |",
              "|---|---|---|---|---|---|"]
     for path in bundled_models():
         meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
         record = json.loads(meta.custom_metadata_map.get("rbc.model", "{}"))
-        smoothing = serving_alpha(meta.custom_metadata_map.get(SERVING_KEY))
+        serving = Serving.from_json(meta.custom_metadata_map.get(SERVING_KEY))
         answer = []
         if str(record.get("mirror_average")).lower() == "true":
             answer.append("mirror-averaged")
         if str(record.get("output_scale", 1)) not in ("1.0", "1"):
-            answer.append(f"times {record['output_scale']}")
-        if smoothing < OFF:
-            answer.append(f"smoothed {smoothing:g}")
+            answer.append(f"times {record['output_scale']} in the graph")
+        if serving.gain != NO_GAIN:
+            answer.append(f"gain {serving.gain:g}")
+        if serving.smoothing < OFF:
+            answer.append(f"smoothed {serving.smoothing:g}")
         params = f"{int(record['parameters']):,}" if record.get("parameters") else "–"
         samples = f"{int(record['train_samples']):,}" if record.get("train_samples") else "–"
         lines.append(f"| `{path.name}` | {record.get('arch', '–')} ({params}) | {record.get('behavior', '–')}, "

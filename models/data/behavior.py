@@ -12,7 +12,6 @@ from enum import StrEnum
 from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
 from models.augmentation.augment import AugmentSpec
 from models.networks.architectures import ARCHITECTURES, Arch
-from protocol.errors import BadValue
 
 
 class Behavior(StrEnum):
@@ -47,14 +46,6 @@ def keeps_lane(behavior: str | None) -> bool:
     """Whether ``behavior`` keeps to one lane of a two-lane road: a left-right asymmetric task, so it trains
     without flips, and averaging with the mirrored frame (``--mirror-average``, ``rbc mirror``) would undo it."""
     return behavior in set(Behavior) and BEHAVIOR_SPECS[Behavior(behavior)].augment.flip == 0.0
-
-
-def check_output_scale(scale: float) -> float:
-    """``scale`` if an exported model may answer that many times its network (``--output-scale``, not in the
-    paper: a model fitted to the drivers it saw answers a new driver more strongly than they steer)."""
-    if not 0.1 <= scale <= 2.0:
-        raise BadValue(f"output scale must be 0.1..2, got {scale:g}")
-    return scale
 
 
 #: NVIDIA's approach (Table 10, left column): no side cameras, no shadows/pan/tilt; random flip, a

@@ -95,22 +95,6 @@ class MirrorAveraged(nn.Module):
         return 0.5 * (straight - mirrored)
 
 
-class OutputScaled(nn.Module):
-    """``scale * f(x)``: a network trained on the drivers it saw answers a new driver's frames more strongly
-    than that driver steers (its answers correlate with theirs at r ~0.45, so the least-squares answer is
-    about half as strong as its own); a scale below 1, chosen on held-out drivers, trades none of the
-    correlation for a lower error, and the closed loop needs only part of the strength (docs/experiments.md).
-    """
-
-    def __init__(self, net: nn.Module, scale: float) -> None:
-        super().__init__()
-        self.net = net
-        self.scale = float(scale)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x) * self.scale
-
-
 def _flat_size(features: nn.Module, height: int, width: int) -> int:
     with torch.no_grad():
         return int(features(torch.zeros(1, 3, height, width)).numel())

@@ -18,7 +18,8 @@ import onnxruntime as ort
 from onnx import compose, helper
 
 from drive_server.contract import PreprocessContract
-from drive_server.smoothing import NAME, OLD_NAMES, SERVING_KEY, serving_alpha
+from drive_server.serving import SERVING_KEY, Serving
+from drive_server.smoothing import NAME, OLD_NAMES
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 from protocol import runrecords
 from protocol.errors import BadValue
@@ -30,18 +31,25 @@ class EnsembleError(BadValue):
     """The models cannot be averaged into one; the message is one line."""
 
 
-def _serving(srcs: Sequence[Path], metas: Sequence[dict[str, str]], smoothing: float | None) -> float:
-    """The smoothing the ensemble asks for: ``smoothing`` if given, else the members' (which must agree)."""
-    if smoothing is not None:
-        return smoothing
+def _serving(srcs: Sequence[Path], metas: Sequence[dict[str, str]], smoothing: float | None) -> Serving:
+    """What the ensemble asks drive_server for: the members' gain (which must agree: the mean of their networks is
+    served), and ``smoothing`` if given, else the members' (which must agree)."""
     try:
-        asked = {serving_alpha(m.get(SERVING_KEY)) for m in metas}
+        members = [Serving.from_json(m.get(SERVING_KEY)) for m in metas]
     except ValueError as exc:
         raise EnsembleError(str(exc)) from None
+    gains = {m.gain for m in members}
+    if len(gains) > 1:
+        raise EnsembleError(f"{srcs[0].name} and the others ask drive_server for different steering gains "
+                            f"({', '.join(f'{g:g}' for g in sorted(gains))}): average models served alike")
+    gain = gains.pop()
+    if smoothing is not None:
+        return Serving(smoothing, gain)
+    asked = {m.smoothing for m in members}
     if len(asked) > 1:
         raise EnsembleError(f"{srcs[0].name} and the others ask drive_server to smooth differently "
                             f"({', '.join(f'{a:g}' for a in sorted(asked))}): say which with --serve-smooth")
-    return asked.pop()
+    return Serving(asked.pop(), gain)
 
 
 def ensemble_onnx(srcs: Sequence[Path], dst: Path, smoothing: float | None = None, seed: int = 0) -> float:
@@ -61,7 +69,7 @@ def ensemble_onnx(srcs: Sequence[Path], dst: Path, smoothing: float | None = Non
                                 "same input")
         if opsets(member.proto) != opsets(first.proto):
             raise EnsembleError(f"{src}: its ONNX opset differs from {srcs[0].name}'s")
-    alpha = _serving(srcs, [m.meta for m in members], smoothing)
+    serving = _serving(srcs, [m.meta for m in members], smoothing)
 
     image = next(i for i in first.proto.graph.input if i.name == first.input_name)
     nodes, initializers, outputs = [], [], []
@@ -79,7 +87,7 @@ def ensemble_onnx(srcs: Sequence[Path], dst: Path, smoothing: float | None = Non
     info = {**first.info, "ensemble": [{"file": Path(s).name, **m.info} for s, m in zip(srcs, members, strict=True)]}
     for key in (NAME, *OLD_NAMES):  # the members' request; set_model_metadata records the ensemble's
         info.pop(key, None)
-    set_model_metadata(out, info, alpha, first.contract)
+    set_model_metadata(out, info, serving.smoothing, first.contract, serving.gain)
     onnx.checker.check_model(out)
     with runrecords.atomic_path(Path(dst)) as tmp:
         onnx.save(out, str(tmp))

@@ -20,6 +20,7 @@ from torch import nn
 
 from drive_server.contract import METADATA_KEY, PreprocessContract
 from drive_server.preprocess import to_input_tensor
+from drive_server.serving import NO_GAIN
 from drive_server.smoothing import OFF
 from models.networks.nets import ContractInput
 from models.onnxfiles.onnx_metadata import set_model_metadata
@@ -41,10 +42,11 @@ class ExportError(UserError, RuntimeError):
 
 
 def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, Any], path: Path,
-                frames: np.ndarray, smoothing: float = OFF) -> float:
+                frames: np.ndarray, smoothing: float = OFF, gain: float = NO_GAIN) -> float:
     """Write ``path`` (atomically) and return the max |ORT - torch| on ``frames`` (uint8 network images).
 
-    ``smoothing`` < 1: the model asks drive_server to smooth each client's steering so (``rbc.serving``).
+    ``smoothing`` < 1 and ``gain`` != 1: the model asks drive_server to serve it so (``rbc.serving``); the graph
+    is the network's alone.
     """
     model = ContractInput(net, contract.layout).eval()
     dummy = torch.zeros(contract.input_shape, dtype=torch.float32)
@@ -56,7 +58,7 @@ def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, An
                               input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
                               dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}})
         proto = onnx.load(str(tmp))
-        set_model_metadata(proto, info, smoothing, contract)
+        set_model_metadata(proto, info, smoothing, contract, gain)
         proto.producer_name = "robust-behavioral-cloning"
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))

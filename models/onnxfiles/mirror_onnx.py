@@ -19,8 +19,8 @@ import onnxruntime as ort
 from onnx import helper, numpy_helper
 
 from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
-from drive_server.smoothing import OFF
-from models.data.behavior import check_output_scale, keeps_lane
+from drive_server.serving import SERVING_KEY, Serving, check_gain
+from models.data.behavior import keeps_lane
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 from protocol import runrecords
 from protocol.errors import BadValue
@@ -33,16 +33,18 @@ class MirrorError(BadValue):
     """The model cannot be mirror-averaged; the message is one line."""
 
 
-def mirror_average_onnx(src: Path, dst: Path, smoothing: float = OFF, seed: int = 0,
-                        output_scale: float = 1.0) -> float:
-    """Write ``dst`` (atomically) from ``src``; return the max |mirrored - S (f(x) - f(mirror x)) / 2| on random
-    inputs (``seed``), S = ``output_scale`` (as ``rbc train --output-scale``). ``smoothing`` < 1 also asks
-    drive_server to smooth each client's steering so."""
-    try:
-        check_output_scale(output_scale)
-    except ValueError as exc:
-        raise MirrorError(str(exc)) from None
+def mirror_average_onnx(src: Path, dst: Path, smoothing: float | None = None, seed: int = 0,
+                        gain: float | None = None) -> float:
+    """Write ``dst`` (atomically) from ``src``; return the max |mirrored - (f(x) - f(mirror x)) / 2| on random
+    inputs (``seed``). The file asks drive_server for ``smoothing`` and ``gain`` (drive_server.serving; None:
+    what ``src`` asks for), as a recipe's ``[export]`` does."""
     model = read_steering_graph(src, MirrorError)
+    try:
+        asked = Serving.from_json(model.meta.get(SERVING_KEY))
+        serving = Serving(asked.smoothing if smoothing is None else smoothing,
+                          asked.gain if gain is None else check_gain(gain))
+    except ValueError as exc:
+        raise MirrorError(f"{src}: {exc}" if smoothing is None and gain is None else str(exc)) from None
     proto, graph, info, shape, contract = model.proto, model.proto.graph, model.info, model.shape, model.contract
     if info.get("mirror_average"):
         raise MirrorError(f"{src}: already mirror-averaged (its {METADATA_MODEL_INFO_KEY} says so)")
@@ -60,7 +62,7 @@ def mirror_average_onnx(src: Path, dst: Path, smoothing: float = OFF, seed: int 
         node.output[:] = [pair if n == steering else n for n in node.output]
     consts = {"starts": [-1], "ends": [np.iinfo(np.int64).min], "axes": [width_axis], "steps": [-1]}
     graph.initializer.extend(numpy_helper.from_array(np.array(v, np.int64), f"{_PREFIX}{k}") for k, v in consts.items())
-    graph.initializer.append(numpy_helper.from_array(np.array(0.5 * output_scale, np.float32), f"{_PREFIX}half"))
+    graph.initializer.append(numpy_helper.from_array(np.array(0.5, np.float32), f"{_PREFIX}half"))
     head = [helper.make_node("Slice", [image, *(f"{_PREFIX}{k}" for k in consts)], [f"{_PREFIX}mirrored"]),
             helper.make_node("Concat", [image, f"{_PREFIX}mirrored"], [both], axis=0)]
     tail = [helper.make_node("Split", [pair], [first, second], axis=0),
@@ -71,18 +73,17 @@ def mirror_average_onnx(src: Path, dst: Path, smoothing: float = OFF, seed: int 
     graph.node.extend(nodes)
     del graph.value_info[:]  # shapes inside changed (batch 2N); ONNX Runtime infers them again
 
-    scale = {"output_scale": float(info.get("output_scale", 1.0)) * output_scale} if output_scale != 1.0 else {}
-    set_model_metadata(proto, {**info, "mirror_average": True, **scale}, smoothing)
+    set_model_metadata(proto, {**info, "mirror_average": True}, serving.smoothing, gain=serving.gain)
     onnx.checker.check_model(proto)
     with runrecords.atomic_path(Path(dst)) as tmp:
         onnx.save(proto, str(tmp))
-        worst = _verify(Path(src), tmp, contract, width_axis, seed, output_scale)
+        worst = _verify(Path(src), tmp, contract, width_axis, seed)
     return worst
 
 
-def _verify(src: Path, dst: Path, contract: PreprocessContract, width_axis: int, seed: int, scale: float) -> float:
-    """The mirrored file against ``scale`` times the original's average on random inputs, singly and as a
-    batch; MirrorError beyond ``TOLERANCE``."""
+def _verify(src: Path, dst: Path, contract: PreprocessContract, width_axis: int, seed: int) -> float:
+    """The mirrored file against the original's average on random inputs, singly and as a batch; MirrorError
+    beyond ``TOLERANCE``."""
     rng = np.random.default_rng(seed)
     x = (rng.random((4, *contract.input_shape[1:]), dtype=np.float32) - 0.5).astype(np.float32)
     original, mirrored = (ort.InferenceSession(str(p), providers=["CPUExecutionProvider"]) for p in (src, dst))
@@ -90,9 +91,9 @@ def _verify(src: Path, dst: Path, contract: PreprocessContract, width_axis: int,
     def run(session: ort.InferenceSession, batch: np.ndarray) -> np.ndarray:
         return session.run(None, {session.get_inputs()[0].name: batch})[0].reshape(len(batch), -1)
 
-    want = 0.5 * scale * (run(original, x) - run(original, np.ascontiguousarray(np.flip(x, axis=width_axis))))
+    want = 0.5 * (run(original, x) - run(original, np.ascontiguousarray(np.flip(x, axis=width_axis))))
     got = np.concatenate([run(mirrored, x[i:i + 1]) for i in range(len(x))])
     worst = float(max(np.abs(got - want).max(), np.abs(run(mirrored, x) - want).max()))
     if not np.isfinite(worst) or worst >= TOLERANCE:
-        raise MirrorError(f"{dst}: the mirrored model differs from {scale:g} (f(x) - f(mirror x)) / 2 by {worst:.3g}")
+        raise MirrorError(f"{dst}: the mirrored model differs from (f(x) - f(mirror x)) / 2 by {worst:.3g}")
     return worst

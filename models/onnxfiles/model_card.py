@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
-from drive_server.smoothing import NAME, OFF, OLD_NAMES, SERVING_KEY, serving_alpha
+from drive_server.serving import GAIN, GAIN_OLD_NAMES, NO_GAIN, SERVING_KEY, Serving
+from drive_server.smoothing import NAME, OFF, OLD_NAMES
 from models.networks.architectures import ARCHITECTURES
 from models.networks.runfiles import RunPaths, RunRecord
 from protocol.errors import BadValue
@@ -43,6 +44,7 @@ class ModelFile:
     info: dict[str, Any]  # its record (rbc.model); {} if none
     contract: dict[str, Any]  # its preprocessing (rbc.preprocess); {} if none
     smoothing: float = OFF  # the steering smoothing it asks drive_server for (1: off)
+    gain: float = 1.0  # the steering gain it asks drive_server for (drive_server.serving; 1: none)
 
 
 @dataclass(frozen=True)
@@ -66,12 +68,12 @@ def read_model_file(path: Path) -> ModelFile:
         meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
         found = meta.custom_metadata_map
         info, contract = (json.loads(found.get(k) or "{}") for k in (METADATA_MODEL_INFO_KEY, METADATA_KEY))
-        smooth = serving_alpha(found.get(SERVING_KEY))
+        serving = Serving.from_json(found.get(SERVING_KEY))
     except Exception as exc:  # ONNX Runtime's own errors, bad JSON, a bad rbc.serving
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
         raise BadValue(f"{path}: not a model file of ours ({first})") from None
     return ModelFile(path, info if isinstance(info, dict) else {}, contract if isinstance(contract, dict) else {},
-                     smooth)
+                     serving.smoothing, serving.gain)
 
 
 def card(src: CardSource) -> str:
@@ -228,14 +230,17 @@ def _training(src: CardSource) -> str:
 
 
 def _answer(src: CardSource) -> str:
-    info, c, smooth = src.model.info, src.record.config, src.model.smoothing
-    mirror, scale = bool(info.get("mirror_average")), float(info.get("output_scale", 1.0))
-    if not mirror and scale == 1.0 and smooth == OFF:
+    info, c, smooth, gain = src.model.info, src.record.config, src.model.smoothing, src.model.gain
+    mirror, baked = bool(info.get("mirror_average")), float(info.get("output_scale", 1.0))  # baked: older files
+    if not mirror and baked == 1.0 and smooth == OFF and gain == NO_GAIN:
         return "the network's steering, as trained."
-    link = _link(src, "glossary.md", "mirror-average-output-scale-smoothing")
+    link = _link(src, "glossary.md", "mirror-average-gain-smoothing")
     text = (f"the file answers the [mirror average]({link}) of the network, (f(x) - f(mirrored x)) / 2" if mirror
-            else f"the file answers the network's steering ([output scale, smoothing]({link}))")
-    text += f", times {scale:g}." if scale != 1.0 else "."
+            else f"the file answers the network's steering ([gain, smoothing]({link}))")
+    text += f", times {baked:g} inside the graph." if baked != 1.0 else "."
+    if gain != NO_GAIN:
+        text += (f" `drive_server` multiplies it by a gain of {gain:g} (`--gain` changes it; `rbc score` scores the "
+                 f"network without it).")
     if smooth < OFF:
         text += f" `drive_server` smooths its steering with {smooth:g}."
     text += " The network's weights are the trained ones"
@@ -260,8 +265,8 @@ def _file_command(src: CardSource, c: dict[str, Any]) -> list[str]:
         asked = next((c[k] for k in (NAME, *OLD_NAMES) if k in c), OFF)  # a run stored before the one name: old
         if src.model.smoothing != asked:
             words += ["--serve-smooth", f"{src.model.smoothing:g}"]
-        scale = float(src.model.info.get("output_scale", 1.0)) / float(c.get("output_scale", 1.0))
-        words += ["--output-scale", f"{scale:g}"] if scale != 1.0 else []
+        asked_gain = next((c[k] for k in (GAIN, *GAIN_OLD_NAMES) if k in c), NO_GAIN)
+        words += ["--gain", f"{src.model.gain:g}"] if src.model.gain != asked_gain else []
     return [_command(words)]
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
-from drive_server.smoothing import NAME, OFF, OLD_NAMES, SERVING_KEY, serving_json
+from drive_server.serving import GAIN, NO_GAIN, SERVING_KEY, serving_json
+from drive_server.smoothing import NAME, OFF, OLD_NAMES
 
 if TYPE_CHECKING:
     import onnx
@@ -57,19 +58,21 @@ def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
 
 
 def set_model_metadata(proto: onnx.ModelProto, info: dict[str, Any], smoothing: float = OFF,
-                       contract: PreprocessContract | None = None) -> None:
-    """Replace ``proto``'s model info (and its contract, if given) and ask for ``smoothing`` (< 1); keys the
-    model already carries otherwise stay."""
+                       contract: PreprocessContract | None = None, gain: float = NO_GAIN) -> None:
+    """Replace ``proto``'s model info (and its contract, if given) and ask drive_server for ``smoothing`` (< 1)
+    and ``gain`` (drive_server.serving); keys the model already carries otherwise stay."""
     meta = {p.key: p.value for p in proto.metadata_props}
     if contract is not None:
         meta[METADATA_KEY] = contract.to_json()
-    old = [k for k in OLD_NAMES if k in info]  # a record written before the one name: it says it in that name
-    info = {**{k: v for k, v in info.items() if k not in old}, **({NAME: info[old[0]]} if old else {})}
+    info = {k: v for k, v in info.items() if k not in (NAME, GAIN, *OLD_NAMES)}  # what is asked is said below
     if smoothing < OFF:  # the model's record says what it asks, as rbc train's does
         info[NAME] = smoothing
+    if gain != NO_GAIN:
+        info[GAIN] = gain
     meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
-    if smoothing < OFF:
-        meta[SERVING_KEY] = serving_json(smoothing)
+    meta.pop(SERVING_KEY, None)
+    if smoothing < OFF or gain != NO_GAIN:
+        meta[SERVING_KEY] = serving_json(smoothing, gain)
     del proto.metadata_props[:]
     for key, value in meta.items():
         proto.metadata_props.add(key=key, value=value)

@@ -83,8 +83,9 @@ SECTIONS: dict[str, dict[str, str]] = {
     "export": {
         "mirror_average": "not in the paper: the model answers (f(x) - f(mirror x)) / 2, its left-right noise "
                           "cancelled (not for a behavior that keeps to one lane); training is unchanged",
-        "output_scale": "not in the paper: the exported steering times this, 0.1..2 (below 1 answers new drivers "
-                        "more gently); training is unchanged",
+        "gain": "not in the paper, written into the model: drive_server multiplies the network's steering by this, "
+                "0.1..2, unless its --gain says otherwise (above 1: the closed loop steers harder than the drivers' "
+                "average); training, the network and its open-loop figures are unchanged",
         "smoothing": "written into the model: drive_server smooths each client's steering with this weight of "
                      "the new output, 0 < w <= 1 (1: off) unless its --smooth says otherwise",
     },

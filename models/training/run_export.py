@@ -1,5 +1,5 @@
-"""The end of a training run: the network as exported (mirror average, output scale), scored on the
-held-out frames, written to ``model.onnx`` and recorded in ``config.json``."""
+"""The end of a training run: the network as exported (mirror average), scored on the held-out frames,
+written to ``model.onnx`` with how it is to be served (gain, smoothing) and recorded in ``config.json``."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from models.data.behavior import Pipeline
 from models.data.trainingdata import PreparedData
 from models.networks import runfiles
 from models.networks.checkpoint import State
-from models.networks.nets import MirrorAveraged, OutputScaled, count_parameters
+from models.networks.nets import MirrorAveraged, count_parameters
 from models.onnxfiles.export import export_onnx
 from models.training.metrics import metrics_by_group, steering_metrics
 from models.training.recipe import recipe_sections
@@ -41,13 +41,9 @@ class TrainResult:
 
 
 def exported_network(model: nn.Module, config: TrainConfig) -> nn.Module:
-    """``model`` as the run exports it: mirror-averaged and scaled when the configuration asks (training is
-    unchanged by either)."""
-    if config.mirror_average:
-        model = MirrorAveraged(model)
-    if config.output_scale != 1.0:
-        model = OutputScaled(model, config.output_scale)
-    return model
+    """``model`` as the run exports it: mirror-averaged when the configuration asks (training is unchanged by
+    it). The serving gain is not part of the network: the model file asks drive_server for it."""
+    return MirrorAveraged(model) if config.mirror_average else model
 
 
 def predict(model: nn.Module, data: PreparedData, pipeline: Pipeline, positions: np.ndarray,
@@ -82,11 +78,11 @@ def finish(model: nn.Module, data: PreparedData, pipeline: Pipeline, config: Tra
             "parameters": count_parameters(model), "code_version": runrecords.code_version(),
             "split": config.split, "export": config.export, "exported_epoch": exported_epoch,
             "val_r": metrics["r"], "val_zero_mse": metrics["zero_mse"], "camera_rig": data_rig(config.data),
-            "mirror_average": config.mirror_average, "output_scale": config.output_scale,
+            "mirror_average": config.mirror_average, "gain": config.gain,
             "smoothing": config.smoothing, "recipe": recipe_sections(config)}
     frames = data.cache.frames[0, data.val[:EXPORT_FRAMES]]
     path = runfiles.RunPaths(run_dir).model
-    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.smoothing)
+    diff = export_onnx(model.eval(), pipeline.contract, info, path, frames, config.smoothing, config.gain)
     runfiles.write_result(run_dir, {"export": config.export, "exported_epoch": exported_epoch, "val_mse": val_loss,
                                     "last_epoch_val_mse": last_val, "val_metrics": metrics, "split": config.split,
                                     "rows": data.counts, "onnx_max_diff": diff, "val_by_recording": by_recording})

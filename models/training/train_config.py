@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from drive_server.contract import ContractError, PreprocessContract
+from drive_server.serving import check_gain
 from models.augmentation import geometry
 from models.augmentation.augment import LOOKAHEAD_M, AugmentSpec
 from models.data.behavior import (
@@ -16,7 +17,6 @@ from models.data.behavior import (
     BATCH_SIZE,
     LEARNING_RATE,
     Pipeline,
-    check_output_scale,
     keeps_lane,
     pipeline_for,
 )
@@ -31,9 +31,10 @@ SCALE_BRIGHTNESS_RANGE = 0.5
 #: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
 LEGACY = {"split": "random", "export": "last"}
 #: Keys of stored runs renamed since (old -> new), so run configs written before still load.
-RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "smoothing", "serve_smoothing": "smoothing"}
+RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "smoothing", "serve_smoothing": "smoothing",
+           "output_scale": "gain"}
 #: Recipe keys renamed since recipes exist (old -> new, same section), so a recipe file written before still loads.
-RENAMED_IN_RECIPES = {"serve_smoothing": "smoothing"}
+RENAMED_IN_RECIPES = {"serve_smoothing": "smoothing", "output_scale": "gain"}
 #: Knobs removed because they were measured useless (docs/experiments.md), with the value that did nothing: a stored
 #: run holding that value still loads, one holding another cannot be reproduced any more.
 REMOVED = {"label_lag": 0, "recovery_distance": None}
@@ -112,9 +113,9 @@ class TrainConfig:
     offset_lookahead: float = LOOKAHEAD_M
     # not in the paper: export (f(x) - f(mirror x)) / 2 (models.networks.nets.MirrorAveraged); training is unchanged
     mirror_average: bool = False
-    # not in the paper: the exported model's steering times this (models.networks.nets.OutputScaled; 1: as trained);
-    # training is unchanged
-    output_scale: float = 1.0
+    # not in the paper: drive_server multiplies the network's steering by this unless told otherwise
+    # (drive_server.serving; 1: as trained), written into the model's metadata; training and the network unchanged
+    gain: float = 1.0
     # how drive_server smooths each client's steering unless told otherwise: the weight of the new output
     # (drive_server.smoothing; 1: off), written into the model's metadata
     smoothing: float = 1.0
@@ -146,7 +147,7 @@ class TrainConfig:
             raise BadValue(f"mirror_average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
                            f"left-right asymmetric task (trained without flips); the average would steer it to the "
                            f"road's middle")
-        check_output_scale(self.output_scale)
+        check_gain(self.gain)
         if not 0.0 < self.smoothing <= 1.0:
             raise BadValue(f"smoothing must be above 0 and at most 1 (1: off), got {self.smoothing}")
         if not 0.0 <= self.centre_gain <= 1.0:

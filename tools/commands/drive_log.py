@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from models.networks.runfiles import CONFIG
-from tools.arguments import add_loop_rule_arguments, add_smooth_argument, smooth_alpha
+from tools.arguments import add_gain_argument, add_loop_rule_arguments, add_smooth_argument, serving_gain, smooth_alpha
 from tools.errors import CommandError
 
 if TYPE_CHECKING:
@@ -30,6 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steer-bias", type=float, default=0.0, metavar="B",
                    help="added to every steering value (a biased driver must fail: a check of the measure)")
     add_smooth_argument(p)
+    add_gain_argument(p)
     add_loop_rule_arguments(p)
     p.add_argument("--views", choices=("nearest", "centre"), default=LoopRules.views,
                    help="nearest: re-project the nearest of the three recorded cameras (the side ones are real views "
@@ -68,6 +69,9 @@ def run(args: argparse.Namespace) -> int:
     alpha = smooth_alpha(args)
     if alpha is not None and alpha < 1 and args.model is None:
         raise CommandError("--smooth smooths a model's steering", "give --model M.onnx, or leave --smooth out")
+    gain = serving_gain(args)
+    if gain is not None and args.model is None:
+        raise CommandError("--gain multiplies a model's steering", "give --model M.onnx, or leave --gain out")
     samples, report = read_log(args.data)
     if args.calibrate:
         return _calibrate(samples, args.calibrate_rows)
@@ -99,7 +103,7 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     bars = {"road": "road edges", "loop": "drive-log"}
     run = drive_recording(log, rules, args.model, args.baseline, args.steer_bias, smooth_alpha(args),
                           wheelbase_m=args.wheelbase, bars=lambda phase: Progress(bars[phase], unit="frame"),
-                          say=print, track=args.track, keep=keep)
+                          say=print, track=args.track, keep=keep, gain=serving_gain(args))
     result, name, road, fit = run.result, run.driver, run.road, run.wheelbase_fit
     frames = len(log) if keep is None else int(keep.sum())
     fitted = None if fit is None else {"wheelbase_m": round(fit.wheelbase_m, 3), "pairs": fit.pairs,

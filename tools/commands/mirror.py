@@ -15,16 +15,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the ONNX steering model to mirror-average (left as it is; not a lane-keeping, rigorous "
                         "model: the average drives the road's middle)")
     p.add_argument("--out", type=Path, required=True, help="the mirror-averaged model to write (.onnx)")
-    p.add_argument("--serve-smooth", type=float, default=1.0, metavar="ALPHA",
-                   help="also ask drive_server to smooth each client's steering with this weight of the new output, "
-                        "as a recipe's [export] smoothing (default %(default)s: off)")
-    p.add_argument("--output-scale", type=float, default=1.0, metavar="S",
-                   help="the mirrored model answers S times the average, as a recipe's [export] output_scale (0.1..2; "
-                        "default %(default)s)")
+    p.add_argument("--serve-smooth", "--smoothing", dest="smoothing", type=float, default=None, metavar="ALPHA",
+                   help="ask drive_server to smooth each client's steering with this weight of the new output, "
+                        "as a recipe's [export] smoothing (1: off; default: what the model asks for)")
+    p.add_argument("--gain", "--output-scale", dest="gain", type=float, default=None, metavar="G",
+                   help="ask drive_server to multiply the steering by G (0.1..2), as a recipe's [export] gain "
+                        "(default: what the model asks for)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.smoothing import check_alpha
+    from drive_server.model import SteeringModel
     from models.onnxfiles.mirror_onnx import MirrorError, mirror_average_onnx
 
     if args.out.suffix != ".onnx":
@@ -34,11 +34,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.model.is_file():
         raise CommandError(f"no model at {args.model}")
     try:
-        alpha = check_alpha(args.serve_smooth)
-        worst = mirror_average_onnx(args.model, args.out, alpha, output_scale=args.output_scale)
+        worst = mirror_average_onnx(args.model, args.out, args.smoothing, gain=args.gain)
+        serving = SteeringModel(args.out).serving
     except (MirrorError, ValueError) as exc:
         raise CommandError(str(exc)) from None
-    scale = f"{args.output_scale:g} x " if args.output_scale != 1.0 else ""
-    print(f"wrote {args.out}: {scale}(f(x) - f(mirror x)) / 2 of {args.model.name}, max |difference| {worst:.1e} "
-          f"on random inputs" + (f"; drive_server smooths its steering with {alpha:g}" if alpha < 1 else ""))
+    print(f"wrote {args.out}: (f(x) - f(mirror x)) / 2 of {args.model.name}, max |difference| {worst:.1e} "
+          f"on random inputs" + (f"; drive_server serves it {serving.describe()}" if serving.asks_anything else ""))
     return 0

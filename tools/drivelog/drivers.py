@@ -16,12 +16,14 @@ from tools.drivelog.path import RecordedDrive
 
 
 def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bias: float = 0.0,
-                smooth: float | None = None, readings: list[tuple[int, int]] | None = None) -> tuple[Driver, str]:
+                smooth: float | None = None, readings: list[tuple[int, int]] | None = None,
+                gain: float | None = None) -> tuple[Driver, str]:
     """(driver, its name for the record). Exactly one of ``model`` and ``baseline`` is given.
 
-    The model's steering is smoothed over the drive as drive_server does for a client: by ``smooth``, or (None)
-    as the model's metadata asks. A model carrying a misbehaviour monitor is monitored as drive_server's
-    ``--monitor warn`` does: each view's (frame index, state) is appended to ``readings`` if given.
+    The model's steering is multiplied by the gain and smoothed over the drive as drive_server does for a
+    client: by ``gain`` and ``smooth``, or (None) as the model's metadata asks. A model carrying a misbehaviour
+    monitor is monitored as drive_server's ``--monitor warn`` does: each view's (frame index, state) is appended
+    to ``readings`` if given.
     """
     if model is not None:
         from drive_server.model import SteeringModel
@@ -31,7 +33,7 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
         # the monitor as --monitor warn, without a time budget: the loop runs on the log's clock, so a busy
         # machine must not switch it off and change the figures
         pipeline = DrivePipeline(SteeringModel(Path(model)),
-                                 DriveConfig(smoothing=smooth,
+                                 DriveConfig(smoothing=smooth, gain=gain,
                                              monitor=MonitorPolicy(MonitorMode.WARN, budget_ms=None)))
         smoother = pipeline.smoother()
         monitor = pipeline.client_monitor()  # the model's misbehaviour monitor, if its file carries one (warn)
@@ -43,7 +45,8 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
                 readings.append((i, int(reading.level) if reading is not None else 0))
             return steering
 
-        name = Path(model).name + (f" smoothed {pipeline.smoothing:g}" if smoother is not None else "")
+        name = Path(model).name + (f" gain {pipeline.gain:g}" if pipeline.gain != 1.0 else "") \
+            + (f" smoothed {pipeline.smoothing:g}" if smoother is not None else "")
     elif baseline == "recorded":
         def base(view: np.ndarray, i: int) -> float:
             return float(log.steering[i])

@@ -97,11 +97,12 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
                     baseline: str | None = None, steer_bias: float = 0.0, smooth: float | None = None,
                     wheelbase_m: float | None = None, snapshots: int = 8, bars: Bars = None,
                     say: Callable[[str], None] | None = None, track: str | None = None,
-                    keep: np.ndarray | None = None) -> RecordingRun:
+                    keep: np.ndarray | None = None, gain: float | None = None) -> RecordingRun:
     """Drive ``model`` (or a ``baseline``: ``recorded`` or ``zero``) along the recording by ``rules`` (None: the
     defaults, rbc drive-log's).
 
-    The model's steering is smoothed as drive_server would (``smooth``; None: as its metadata asks) and biased
+    The model's steering is multiplied and smoothed as drive_server would (``gain``, ``smooth``; None: as its
+    metadata asks) and biased
     by ``steer_bias``; the wheelbase is ``wheelbase_m`` or fitted to the frames (``rules.wheelbase_m`` is
     replaced by it); the road is found only for ``lane="road"``, by ``track``'s profile (None: told from the
     frames). ``snapshots``: views kept for the strip. ``keep`` (a flag per frame): drive only those frames, each
@@ -111,7 +112,7 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
     rules = rules or LoopRules()
     driven = log if keep is None else chosen_rows(log, None, keep)[0]
     readings: list[tuple[int, int]] = []
-    driver, name = make_driver(driven, model, baseline, steer_bias, smooth, readings)
+    driver, name = make_driver(driven, model, baseline, steer_bias, smooth, readings, gain)
     wheelbase, fit, road = car_and_road(log, wheelbase_m, rules.lane == "road", bars, say, track)
     if keep is not None:
         road = chosen_rows(log, road, keep)[1]

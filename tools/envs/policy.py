@@ -33,14 +33,14 @@ class OnnxPolicy:
     grey levels of what drive_server would feed it."""
 
     def __init__(self, path: str | Path, control: str = "steer", smoothing: float | None = None, threads: int = 1,
-                 law: ControlLaw | None = None) -> None:
+                 law: ControlLaw | None = None, gain: float | None = None) -> None:
         if control not in CONTROLS:
             raise BadValue(f"control must be one of {', '.join(CONTROLS)}, got {control!r}")
         model = SteeringModel(Path(path), InferenceConfig(threads=threads))
         model.warm_up()
         self.control = control
         self.pipeline = DrivePipeline(model, DriveConfig(law=law or ControlLaw(), speed_unit=SpeedUnit.KMH,
-                                                         smoothing=smoothing))
+                                                         smoothing=smoothing, gain=gain))
         self.smoother: SteeringSmoother | None = self.pipeline.smoother()
         #: the camera rig the model learnt (its record; ``rbc sim --model`` shows it the same): make the env with it
         self.camera_rig = model_rig(path)

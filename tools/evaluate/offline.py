@@ -61,7 +61,8 @@ def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, fl
 def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
                 on_frame: Callable[[], None] | None = None, smooth_frames: int = 0,
                 smooth: float | None = None) -> OfflineScore:
-    pipeline = DrivePipeline(SteeringModel(model_path), DriveConfig(smoothing=smooth))
+    # the network's own answer: the serving gain is for the closed loop (drive_server.serving), not scored here
+    pipeline = DrivePipeline(SteeringModel(model_path), DriveConfig(smoothing=smooth, gain=1.0))
     smoother = pipeline.smoother()
     pred = np.empty(len(frames))
     for i, (path, _) in enumerate(frames):
