@@ -172,6 +172,26 @@ def test_stats_tells_a_mouse_driver_and_counts_missing_frames_and_sessions(tmp_p
     assert min(k["intent_r"], m["intent_r"]) < doc["total"]["intent_r"] < 1
 
 
+def test_the_stats_table_fits_100_columns_with_the_columns_the_guide_names():
+    """Was 127 characters wide: the documentation's block hid r9, <5mph and dups off the column's edge."""
+    from tools.realdata.stats import RecordingStats
+    from tools.realdata.table import format_table
+
+    longest = max((r.name for r in public_recordings()), key=len)
+    row = RecordingStats(name=longest, rows=14_999, rows_with_sides=14_999, missing_images=1_234, skipped_rows=0,
+                         undated_rows=0, frame_rate_hz=14.9, sessions=12, zero_steer_share=0.81, input="keyboard",
+                         steer_min=-1.0, steer_max=1.0, abs_steer_p5=0.04, abs_steer_p95=0.35, intent_r=0.31,
+                         speed_min_mph=0.0, speed_max_mph=30.2, creep_share=0.12, duplicates=1_234, sharpness=80_511)
+    total = RecordingStats(**{**row.as_dict(), "name": "total", "rows": 208_000, "rows_with_sides": 208_000,
+                              "input": "mixed"})
+    lines = format_table([row] * 39, total).splitlines()
+    assert max(map(len, lines)) <= 100
+    head = lines[0].split()
+    assert {"rows", "missing", "Hz", "r9", "<5mph", "dups"} <= set(head)
+    assert lines[2].split()[head.index("r9") - 1] == "0.31"  # "zero %" is one title of two words
+    assert lines[-1].split()[:2] == ["total", "208000"]
+
+
 def test_intent_r_is_the_r_a_model_predicting_the_drivers_average_would_score():
     taps = np.zeros(200)
     taps[::10] = -0.4  # a keyboard driver tapping once a second on a long bend

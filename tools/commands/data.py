@@ -14,6 +14,7 @@ from models.networks.runfiles import MODEL
 from tools.arguments import add_loop_rule_arguments, add_smooth_argument, add_speed_unit_argument, smooth_alpha
 from tools.realdata.fetch import DEFAULT_BASE_URL
 from tools.realdata.recordings import TRACKS
+from tools.realdata.table import COLUMN_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     formatter = parser.formatter_class
     stats = sub.add_parser("stats", formatter_class=formatter, help="one line of figures per recording, and a total",
                            description="rows, frames, frame rate, sessions, steering, speed, duplicates and "
-                                       "sharpness of each recording")
+                                       "sharpness of each recording. The columns: " + COLUMN_HELP)
     stats.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="recording folders (driving_log.csv + IMG/)")
     stats.add_argument("--json", type=Path, default=None, metavar="OUT", help="also write the figures as JSON")
     stats.add_argument("--sharpness-frames", type=int, default=20, metavar="N",
