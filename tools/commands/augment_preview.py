@@ -16,6 +16,10 @@ if TYPE_CHECKING:
     from models.training.train_config import TrainConfig
 
 
+#: Samples side by side (each as its reference and its network input): the picture stays readable at a page's width.
+PREVIEW_COLUMNS = 2
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", action="append", required=True, metavar="DIR", help="recording directory or log")
     parser.add_argument("--recipe", metavar="FILE_OR_NAME",
@@ -90,9 +94,9 @@ def _write_preview(args: argparse.Namespace, config: TrainConfig) -> int:
     params = draw_params(steering[pick], sides, pipeline.augment, rng)
     fast = FastAugmenter(cache, pipeline.augment).images(np.arange(len(chosen)), params)
 
-    cols = 4
+    cols = PREVIEW_COLUMNS
     rows = int(np.ceil(len(chosen) / cols))
-    fig, axes = plt.subplots(rows, cols * 2, figsize=(cols * 2 * 2.6, rows * 1.75), squeeze=False)
+    fig, axes = plt.subplots(rows, cols * 2, figsize=(cols * 2 * 2.6, rows * 1.9 + 0.5), squeeze=False)
     for ax in axes.flat:
         ax.axis("off")
     for k, s in enumerate(chosen):
@@ -104,16 +108,15 @@ def _write_preview(args: argparse.Namespace, config: TrainConfig) -> int:
         r, c = divmod(k, cols)
         a_full, a_net = axes[r, 2 * c], axes[r, 2 * c + 1]
         a_full.imshow(full)
-        a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{_describe(params, k)}", fontsize=6.5)
+        a_full.set_title(f"{s.steering:+.3f} -> {label:+.3f}\n{_describe(params, k)}", fontsize=8)
         a_net.imshow(net, interpolation="nearest")
-        a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=6.5)
+        a_net.set_title(f"network input {net.shape[1]}x{net.shape[0]}", fontsize=8)
     a, contract = pipeline.augment, pipeline.contract
     bright = f"p + U(-{a.brightness_range:g}, {a.brightness_range:g})" if a.brightness_mode == "add" else \
         f"p x (1 + U(-{a.brightness_range:g}, {a.brightness_range:g}))"
-    fig.suptitle(f"{config.behavior} / {config.approach}: recorded label -> training label "
-                 f"(left: full-resolution reference, right: training input, "
-                 f"rows {contract.crop_top}-{contract.crop_bottom}); "
-                 f"brightness {bright}", fontsize=9)
+    fig.suptitle(f"{config.behavior} / {config.approach}: recorded label -> training label; brightness {bright}\n"
+                 f"left: full-resolution reference, right: training input (rows {contract.crop_top}-"
+                 f"{contract.crop_bottom})", fontsize=9)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=110)
