@@ -62,6 +62,9 @@ def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
     assert "| lake | 2 | 0.70 | 0.40 | 0.50 | 1 of 2 | 30.0 | 10.0 | 0.50 | 0.60 | 1 of 1 | 20.0 | 8.0 |" in text
     assert "| a | lake | A | 10 | 0.0500 | **0.0400** | 0.50 | 0.80 | 0.60 | 20.0 (3; 8.0 s) | **0.0400** |" in text
     assert "| b | lake | B | 10 | 0.0200 | 0.0300 |" in text  # not bold: always-0 is better
+    assert text.splitlines()[0].startswith("| track | recordings | r9 | mean r | r to intent |")  # the glossary's
+    clean = format_tables([replace(scores[0], eta=100.0, interventions=0, seconds_per_takeover=60.0)])
+    assert "| 100.0 (0) |" in clean and "60.0 s" not in clean  # no rate for no take-over
     assert "| jungle | 1 | – | 0.60 | – | 1 of 1 | – | – | – | – | – | – | – |" in text
 
 

@@ -22,7 +22,7 @@ def test_eval_over_the_socket_writes_results_and_table(tmp_path, shallow_onnx):
     results = json.loads((out / "results.json").read_text())
     meta = results["meta"]
     assert len(meta["model_sha256"]) == 64 and meta["code_version"] and meta["seeds"] == 2
-    assert meta["autonomy_rule"].startswith("no intervention")
+    assert meta["autonomy_rule"].startswith("no take-over")
     runs = results["runs"]
     assert sorted(r["seed"] for r in runs if r["experiment"] == "no_variation") == [0, 1]
     for r in runs:  # every run carries its parameters, seed, eta, interventions and timings

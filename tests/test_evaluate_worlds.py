@@ -35,7 +35,7 @@ def test_mean_std_and_the_worst_world_over_worlds():
     assert entry["worst"] == {"seed": 1_000_001, "eta": 75.0}  # ties go to the lowest seed
     assert entry["autonomous"] == 1 and [w["seed"] for w in entry["worlds"]] == [1_000_000 + k for k in range(4)]
     assert [w["interventions"] for w in entry["worlds"]] == [0, 6, 1, 2]
-    assert format_cell(entry) == ("η = 85.0 ± 10.6 % over 4 worlds (1 with no intervention; "
+    assert format_cell(entry) == ("η = 85.0 ± 10.6 % over 4 worlds (1 with no take-over; "
                                   "worst: world 1000001, 75.0 %)")
     single = summarize_worlds([record(1_000_000, [100.0])])
     assert single["std"] == 0.0 and single["worst"] == {"seed": 1_000_000, "eta": 100.0}

@@ -1,12 +1,12 @@
-"""DAgger (Ross, Gordon and Bagnell 2011) on ``rbc/Drive-v0``: ``rbc dagger``, and its behavioural-cloning baseline.
+"""DAgger (Ross, Gordon and Bagnell 2011) on ``rbc/Drive-v0``: ``rbc dagger``, and its behavioral-cloning baseline.
 
-Start with behavioural cloning on the autopilot's driving, then rounds: the learner drives (the expert mixed in
+Start with behavioral cloning on the autopilot's driving, then rounds: the learner drives (the expert mixed in
 per step with probability beta, decaying), the autopilot labels every visited frame with its pure-pursuit
 steering (``info["expert_action"]``), the rounds' frames are aggregated, the learner is retrained from scratch on
 them with ``rbc train``'s pipeline and exported to ONNX, and each round's model is scored on unseen generated
 worlds and the built-in tracks exactly as ``rbc eval`` scores a model. :mod:`tools.dagger.loop` has the rounds,
 :mod:`~tools.dagger.rollout` the data, :mod:`~tools.dagger.scoring` the evaluation, :mod:`~tools.dagger.report`
-the comparison with behavioural cloning at equal expert frames; docs/python.md the measurement.
+the comparison with behavioral cloning at equal expert frames; docs/python.md the measurement.
 
 Why a loop of our own and not the ``imitation`` library's ``SimpleDAggerTrainer`` (imitation 1.0.1,
 the newest on the package index):

@@ -1,4 +1,4 @@
-"""What defines a DAgger (or behavioural-cloning baseline) run, and the per-round numbers derived from it.
+"""What defines a DAgger (or behavioral-cloning baseline) run, and the per-round numbers derived from it.
 
 One frozen dataclass, checked on construction, so a bad value is a :class:`protocol.errors.BadValue` naming it
 before anything is written. ``to_dict`` is what ``OUT/dagger.json`` and every round's record keep; a resumed run
@@ -106,7 +106,7 @@ class DaggerConfig:
 
     def beta(self, round_: int) -> float:
         """The probability that the expert drives a step in round ``round_``: 1 in round 0 (there is no learner
-        yet: behavioural cloning on the expert's laps) and in every round of "bc"; beta0 * beta_decay ** round_
+        yet: behavioral cloning on the expert's laps) and in every round of "bc"; beta0 * beta_decay ** round_
         after that."""
         if self.mode == "bc" or round_ == 0:
             return 1.0

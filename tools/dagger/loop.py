@@ -3,7 +3,7 @@
 Round r (``OUT/round-RR/``):
 
 1. ``data/``: ``config.new_frames(r)`` frames driven on training worlds, every one labelled by the expert
-   (:mod:`tools.dagger.rollout`). Round 0 is the expert's alone (behavioural cloning on its laps); from round 1 the
+   (:mod:`tools.dagger.rollout`). Round 0 is the expert's alone (behavioral cloning on its laps); from round 1 the
    previous round's model drives each step with probability 1 - beta, beta = beta0 * beta_decay ** r. The "bc"
    baseline is the same loop with the expert driving every step of every round, so both see the same worlds,
    spawns and recipe and differ only in who drove while the frames were labelled.

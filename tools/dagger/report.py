@@ -1,4 +1,4 @@
-"""DAgger against behavioural cloning at equal expert frames: the table, the curve and the target's verdict.
+"""DAgger against behavioral cloning at equal expert frames: the table, the curve and the target's verdict.
 
 Reads two finished (or partly finished) ``rbc dagger`` runs, one ``--baseline bc``, from their ``summary.json``
 and writes ``comparison.md`` (one row per budget, both methods side by side), ``comparison.json`` and
@@ -36,7 +36,7 @@ def frames_to_target(rows: list[dict[str, Any]]) -> int | None:
 
 def verdict(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> dict[str, Any]:
     """Issue #46's target: DAgger drives every unseen world at >= 95 % with at most a third of the expert frames
-    behavioural cloning needs for the same (or, where BC never gets there, a third of the most it was given)."""
+    behavioral cloning needs for the same (or, where BC never gets there, a third of the most it was given)."""
     d, b = frames_to_target(dagger), frames_to_target(bc)
     most_bc = max((r["expert_frames"] for r in bc), default=0)
     bound = b if b is not None else most_bc
@@ -158,7 +158,7 @@ def plot_curve(dagger: list[dict[str, Any]], bc: list[dict[str, Any]], path: Pat
               + [r.get(k, 100) for r in dagger + bc for k in ("lake_eta", "mountain_eta")])
     for ax in (left, right):
         ax.set_ylim(max(0.0, low - 5), 101)
-    fig.suptitle("DAgger against behavioural cloning at equal expert frames (rbc dagger)", fontsize=11)
+    fig.suptitle("DAgger against behavioral cloning at equal expert frames (rbc dagger)", fontsize=11)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)

@@ -12,11 +12,11 @@ from typing import Any, Literal
 from protocol.facts import BEHAVIORS
 
 #: The paper reports ranges "for which the ego vehicle exhibited ~100% autonomy". We define it once:
-AUTONOMY_RULE = "no intervention in any lap of the run (eta = 100 %)"
+AUTONOMY_RULE = "no take-over in any lap of the run (degree of autonomy 100 %)"
 
 
 def is_autonomous(run: dict[str, Any]) -> bool:
-    """The single definition of "~100 %": no intervention in any lap, and every lap completed."""
+    """The single definition of "~100 %": no take-over in any lap, and every lap completed."""
     laps = run["laps"]
     return bool(laps) and all(lap["completed"] and not lap["interventions"] for lap in laps)
 

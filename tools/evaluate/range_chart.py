@@ -1,6 +1,6 @@
 """The searched ranges of several models as bars, one panel per range experiment (Table 10 as a picture).
 
-A bar spans the offsets at which the model still drove with no intervention; an arrow marks a side
+A bar spans the offsets at which the model still drove with no take-over; an arrow marks a side
 whose search reached its cap (the true limit lies further out); the dashed lines are the caps.
 The paper's ranges, where it gives them, are drawn hatched for comparison.
 """
@@ -77,7 +77,7 @@ def plot_ranges(columns: list[dict[str, Any]], path: Path, with_paper: bool = Tr
         ax.grid(axis="x", alpha=0.3)
     labels = [label for label, _ in rows] + [label for label, _ in paper]
     axes[0].set_yticks(range(n - 1, -1, -1), labels, fontsize=9)
-    fig.suptitle("Ranges with no intervention (arrow: the search reached its cap; dashed: caps; hatched: paper)",
+    fig.suptitle("Ranges with no take-over (arrow: the search reached its cap; dashed: caps; hatched: paper)",
                  fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:

@@ -138,10 +138,10 @@ def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out
         fig, ax = plt.subplots(figsize=(6, 3.2), dpi=110)
         ax.plot(xs, ys, "-", color="0.6", zorder=1)
         ax.scatter([x for x, o in zip(xs, ok, strict=True) if o], [y for y, o in zip(ys, ok, strict=True) if o],
-                   color="tab:green", label="~100 % (no intervention)", zorder=2)
+                   color="tab:green", label="~100 % (no take-over)", zorder=2)
         ax.scatter([x for x, o in zip(xs, ok, strict=True) if not o],
                    [y for y, o in zip(ys, ok, strict=True) if not o], color="tab:red", marker="x",
-                   label="intervention(s)", zorder=2)
+                   label="take-over(s)", zorder=2)
         ax.set(xlabel=exp.axis or f"{exp.title} ({exp.unit})", ylabel="degree of autonomy η (%)", title=exp.title,
                ylim=(min(0, min(ys) - 5), 105))
         ax.grid(alpha=0.3)

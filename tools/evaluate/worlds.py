@@ -75,16 +75,16 @@ def summarize_worlds(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def format_worlds(entry: dict[str, Any]) -> str:
-    """``η = 96.1 ± 5.2 % over 10 worlds (8 with no intervention; worst: world 1000004, 82.0 %)``."""
+    """``η = 96.1 ± 5.2 % over 10 worlds (8 with no take-over; worst: world 1000004, 82.0 %)``."""
     if not entry.get("n"):
         return "n/a"
     worst = entry["worst"]
     return (f"η = {entry['mean']:.1f} ± {entry['std']:.1f} % over {entry['n']} worlds ({entry['autonomous']} with "
-            f"no intervention; worst: world {worst['seed']}, {worst['eta']:.1f} %)")
+            f"no take-over; worst: world {worst['seed']}, {worst['eta']:.1f} %)")
 
 
 def plot_worlds(entry: dict[str, Any], path: Path, plt: ModuleType) -> Path | None:  # plt: matplotlib.pyplot
-    """eta per world as bars (green: no intervention, red: intervention), the mean dashed."""
+    """The degree of autonomy per world as bars (green: no take-over, red: take-overs), the mean dashed."""
     worlds = entry.get("worlds") or []
     if not worlds:
         return None

@@ -15,11 +15,12 @@ def _cell(value: float | None, spec: str) -> str:
 def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScore] = ()) -> str:
     """Markdown: the per-track summary, then one row per recording (bold MSE: beats always-0).
 
-    "r to mean" is r against the recorded steering's 9-frame average (what the driver meant); "ceiling" is
-    that average's own r with the recorded steering, about the most any model's r reaches there.
+    The words of the glossary: "r to intent" is r against the recorded steering's 9-frame average (the
+    driver's intent); "r9" is that average's own r with the recorded steering, about the most any model's r
+    reaches there; "autonomy %" is the degree of autonomy. A recording without a take-over has no rate.
     """
-    lines = ["| track | recordings | ceiling | mean r | r to mean | beats always-0 | mean eta % | s per take-over |"
-             + (" peer: mean r | r to mean | beats always-0 | mean eta % | s per take-over |" if peer else ""),
+    lines = ["| track | recordings | r9 | mean r | r to intent | beats always-0 | mean autonomy % | s per take-over |"
+             + (" peer: mean r | r to intent | beats always-0 | mean autonomy % | s per take-over |" if peer else ""),
              "|---|---|---|---|---|---|---|---|" + ("---|---|---|---|---|" if peer else "")]
     peer_by_track = {t.track: t for t in summarise(peer)}
     for t in summarise(scores):
@@ -32,8 +33,8 @@ def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScor
                     f"{_cell(p.mean_eta, '.1f')} | {_cell(p.mean_seconds_per_takeover, '.1f')} |"
                     if p else " – | – | – | – | – |")
         lines.append(row)
-    lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | ceiling | r to mean | "
-              "eta % (take-overs; s per take-over) |" + (" peer MSE | peer r | peer eta % |" if peer else ""),
+    lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | r9 | r to intent | "
+              "autonomy % (take-overs; s per take-over) |" + (" peer MSE | peer r | peer autonomy % |" if peer else ""),
               "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if peer else "")]
     peer_by_name = {p.name: p for p in peer}
 
@@ -41,7 +42,11 @@ def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScor
         return f"**{s.mse:.4f}**" if s.beats_zero else f"{s.mse:.4f}"
 
     def loop(s: RecordingScore) -> str:
-        return "–" if s.eta is None else f"{s.eta:.1f} ({s.interventions}; {s.seconds_per_takeover:.1f} s)"
+        if s.eta is None:
+            return "–"
+        if not s.interventions or s.seconds_per_takeover is None:
+            return f"{s.eta:.1f} ({s.interventions or 0})"
+        return f"{s.eta:.1f} ({s.interventions}; {s.seconds_per_takeover:.1f} s)"
 
     for s in sorted(scores, key=lambda s: (s.track, s.name.lower())):
         row = (f"| {s.name} | {s.track} | {s.fold} | {s.frames} | {s.zero_mse:.4f} | {mse(s)} | {s.pearson_r:.2f} | "

@@ -1,6 +1,6 @@
 """A scripted driver that drives like the paper's humans at a keyboard.
 
-Why imitate the keyboard instead of steering smoothly: behavioural cloning learns from the labels'
+Why imitate the keyboard instead of steering smoothly: behavioral cloning learns from the labels'
 distribution, and the paper's data (like every Udacity recording) is dominated by exactly-zero
 steering with short pulses in between, because a key press ramps Unity's input axis up and a
 release lets it fall back to 0. A pure-pursuit controller says what steering the driver wants; the

@@ -3,7 +3,7 @@ the parameters of the car shared with the dynamic single-track model (:mod:`tool
 
 The Udacity car is a Unity wheel-collider model; at the speeds of the paper (25-45 km/h) on flat
 roads a kinematic bicycle with a first-order longitudinal model reproduces what matters for
-behavioural cloning: the turning radius for a wheel angle, a steering rate limit, a top speed
+behavioral cloning: the turning radius for a wheel angle, a steering rate limit, a top speed
 of about 30 mph and braking. The state is kept at the rear axle (where the turning radius is
 exactly ``L / tan(delta)``); ``centre`` gives the body centre used for cameras, collisions and
 cross-track error.
