@@ -97,7 +97,7 @@ def scores(model: ConvAutoencoder, frames: np.ndarray, batch_size: int = 512) ->
     return np.concatenate(out) if out else np.zeros(0, np.float32)
 
 
-def export_score_graph(model: ConvAutoencoder, contract: PreprocessContract) -> bytes:
+def export_score_graph(model: nn.Module, contract: PreprocessContract) -> bytes:
     """The ONNX graph drive_server runs: the steering model's input (batch 1 or more) -> one score per frame."""
     example = torch.zeros(contract.input_shape, dtype=torch.float32)
     buffer = io.BytesIO()

@@ -1,5 +1,6 @@
-"""``rbc monitor fit``'s work: train the autoencoder on nominal frames, calibrate it on other nominal runs, and
-write the steering model's file with the monitor attached."""
+"""``rbc monitor fit``'s work: train the score (the autoencoder on nominal frames, or the failure predictor on
+runs that failed), calibrate it on other nominal runs, and write the steering model's file with the monitor
+attached."""
 
 from __future__ import annotations
 
@@ -19,14 +20,17 @@ from models.monitoring.autoencoder import export_score_graph, train_autoencoder
 from models.monitoring.calibrate import calibrate
 from models.monitoring.disagreement import SCORE_NAME as SHIFT
 from models.monitoring.disagreement import SHIFT_PIXELS, graph_scores, shift_disagreement_graph
+from models.monitoring.failures import LabelRules, labels, load_run, run_files
 from models.monitoring.frames import load_runs
+from models.monitoring.predictor import SCORE_NAME as PREDICTOR
+from models.monitoring.predictor import train_predictor
 from protocol.errors import BadValue
 
 log = logging.getLogger(__name__)
 
 #: The scores ``rbc monitor fit`` can attach (``keep``: the model file's own monitor, calibrated afresh).
 KEEP = "keep"
-SCORES = (AUTOENCODER, SHIFT, KEEP)
+SCORES = (AUTOENCODER, SHIFT, PREDICTOR, KEEP)
 
 
 @dataclass(frozen=True)
@@ -37,8 +41,9 @@ class FitPlan:
     out: Path
     train: tuple[Path, ...]
     calibration: tuple[Path, ...]
-    # or "shift": the model's disagreement with itself on a moved frame (no training); or "keep": the monitor the
-    # model file already carries, calibrated afresh (another target rate, other nominal driving)
+    # or "shift": the model's disagreement with itself on a moved frame (no training); "predictor": a network that
+    # learns from runs that failed (rbc monitor failures) how likely a failure is within a few seconds; or "keep":
+    # the monitor the model file already carries, calibrated afresh (another target rate, other nominal driving)
     score: str = AUTOENCODER
     epochs: int = 6
     stride: int = 2  # every 2nd training frame: neighbours at 15 Hz are near copies
@@ -54,8 +59,9 @@ class FitPlan:
                            f"{', '.join(sorted(str(p) for p in overlap))}")
         if self.score not in SCORES:
             raise BadValue(f"unknown score {self.score!r}; choose one of {', '.join(SCORES)}")
-        if (self.score == AUTOENCODER and not self.train) or not self.calibration:
-            raise BadValue("give calibration data (--calibration), and for the autoencoder training data (--data)")
+        if (self.score in (AUTOENCODER, PREDICTOR) and not self.train) or not self.calibration:
+            raise BadValue("give calibration data (--calibration), and for the autoencoder and the predictor "
+                           "training data (--data)")
         if self.epochs < 1 or self.stride < 1:
             raise BadValue(f"epochs and stride must be >= 1, got {self.epochs} and {self.stride}")
 
@@ -79,6 +85,17 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
                                   progress=lambda e, n, loss: say(f"  epoch {e}/{n}: reconstruction error {loss:.5f}"))
         graph = export_score_graph(model, contract)
         record |= {"train_frames": int(len(train)), "train": [p.name for p in plan.train], "epochs": plan.epochs}
+    elif plan.score == PREDICTOR:
+        frames, targets, runs_used = _failure_frames(plan, say)
+        say(f"training the failure predictor on {len(frames):,} frames ({int(targets.sum()):,} within "
+            f"{LabelRules().horizon_s:g} s of a failure) from {runs_used} runs, {plan.epochs} epochs")
+        predictor = train_predictor(frames, targets, contract, epochs=plan.epochs, seed=plan.seed,
+                                    progress=lambda e, n, loss: say(f"  epoch {e}/{n}: loss {loss:.4f}"))
+        graph = export_score_graph(predictor, contract)
+        record |= {"train_frames": int(len(frames)), "train_positives": int(targets.sum()), "train_runs": runs_used,
+                   "train": [p.name for p in plan.train], "epochs": plan.epochs,
+                   "labels": {"horizon_s": LabelRules().horizon_s, "quiet_s": LabelRules().quiet_s,
+                              "settle_s": LabelRules().settle_s}}
     elif plan.score == SHIFT:
         graph = shift_disagreement_graph(plan.model)
         record |= {"shift_pixels": SHIFT_PIXELS}
@@ -92,13 +109,46 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
                                                                  "seed")}
         record |= {**kept, "score": old.score, "recalibrated": True}
     say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
-    runs = load_runs(list(plan.calibration), contract, 1, progress=lambda d, t: _every_tenth(say, d, t))
+    runs = _calibration_inputs(plan, contract, say)
     cal = calibrate([graph_scores(graph, r) for r in runs], plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
                     source=", ".join(p.name for p in plan.calibration))
     record = {**cal.record, **record}
     spec = MonitorSpec(str(record["score"]), cal.warn, cal.alarm, plan.window, record)
     attach_monitor(plan.model, plan.out, spec, graph)
     return FitResult(spec, int(record.get("train_frames", 0)), record)
+
+
+def _calibration_inputs(plan: FitPlan, contract: Any, say: Callable[[str], None]) -> list[np.ndarray]:
+    """One input array per calibration run: recorded logs read as the server reads them, or the model's own
+    nominal runs of rbc monitor failures --set calibration (folders of run files; nominal runs only)."""
+    logs = [p for p in plan.calibration if not (Path(p).is_dir() and any(Path(p).glob("*.npz")))]
+    runs = load_runs(logs, contract, 1, progress=lambda d, t: _every_tenth(say, d, t)) if logs else []
+    driven = [p for p in plan.calibration if p not in logs]
+    for path in run_files(driven) if driven else []:
+        run = load_run(path)
+        if run.meta.get("group") != "nominal" or run.meta.get("seed_range", "train") != "train":
+            raise BadValue(f"{path}: calibration takes nominal driving on training worlds only")
+        runs.append(run.floats())
+    return runs
+
+
+def _failure_frames(plan: FitPlan, say: Callable[[str], None]) -> tuple[np.ndarray, np.ndarray, int]:
+    """The labelled frames of the failure runs in ``plan.train``: every frame before a failure, every
+    ``plan.stride``-th of the others; runs on held-out worlds are refused."""
+    files = run_files(plan.train)
+    say(f"reading {len(files)} failure runs")
+    xs, ys = [], []
+    for k, path in enumerate(files):
+        run = load_run(path)
+        if run.meta.get("seed_range", "train") != "train":
+            raise BadValue(f"{path}: a run on an evaluation world: the predictor never trains on held-out worlds")
+        y = labels(run.t, run.takeovers)
+        keep = np.flatnonzero((y == 1) | ((y == 0) & (np.arange(len(y)) % plan.stride == 0)))
+        xs.append(run.inputs[keep])
+        ys.append(y[keep])
+        if (k + 1) % 20 == 0:
+            say(f"  {k + 1} of {len(files)} runs")
+    return np.concatenate(xs), np.concatenate(ys).astype(np.int8), len(files)
 
 
 def _every_tenth(say: Callable[[str], None], done: int, total: int) -> None:

@@ -3,7 +3,9 @@
 ``fit`` trains a small autoencoder on nominal driving (SelfOracle's reconstruction error), sets its warning and
 alarm thresholds from OTHER nominal runs as quantiles for a target false-alarm rate, and writes the steering
 model's file with the monitor in its metadata (:mod:`models.monitoring`; served by :mod:`drive_server.monitor`).
-``eval`` measures it on the headless simulator: held-out nominal driving, perturbed runs and degraded models,
+``failures`` drives the model on training worlds, perturbed, degraded and nominal, and keeps every frame's input
+with the run's take-overs: what ``fit --score predictor`` learns from. ``eval`` measures it on the headless
+simulator: held-out nominal driving, perturbed runs and degraded models,
 the anchors' protocol and the deployment figures, ``act`` against ``warn``, and its cost
 (:mod:`tools.monitoreval`).
 """
@@ -30,11 +32,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fit.add_argument("--out", type=Path, required=True, help="the model file with the monitor to write (.onnx)")
     fit.add_argument("--score", choices=SCORES, default=FitPlan.score,
                      help="autoencoder: SelfOracle's reconstruction error (trained on --data); shift: the model's "
-                          "disagreement with itself on the frame moved 3 pixels sideways (no training); keep: the "
+                          "disagreement with itself on the frame moved 3 pixels sideways (no training); predictor: "
+                          "how likely a failure is within 3 s, learnt from rbc monitor failures' runs (--data); "
+                          "keep: the "
                           "monitor MODEL already carries, its thresholds set afresh (default %(default)s)")
     fit.add_argument("--data", type=Path, action="append", default=[], metavar="DIR",
-                     help="nominal driving to train the autoencoder on (Udacity-format folder, e.g. from rbc collect; "
-                          "repeat)")
+                     help="nominal driving to train the autoencoder on (Udacity-format folder, e.g. from rbc collect), "
+                          "or for the predictor a folder of rbc monitor failures (repeat)")
     fit.add_argument("--calibration", type=Path, action="append", required=True, metavar="DIR",
                      help="OTHER nominal driving to set the thresholds on, at least an hour for the default rates "
                           "(repeat; never evaluation worlds)")
@@ -46,6 +50,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="target warnings per hour of nominal driving (default %(default)s)")
     fit.add_argument("--alarms-per-hour", type=float, default=FitPlan.alarms_per_hour,
                      help="target alarms per hour of nominal driving (default %(default)s)")
+
+    fl = sub.add_parser("failures", formatter_class=parser.formatter_class,
+                        help="drive runs on training worlds and keep them for the failure predictor",
+                        description="drive the model on training worlds (perturbed, degraded, nominal; never a "
+                                    "benchmark, calibration or evaluation world) and write one file per run with "
+                                    "every frame's input and the take-overs, for rbc monitor fit --score predictor "
+                                    "(resumes from OUT)")
+    fl.add_argument("model", type=Path, help="the ONNX steering model (carrying any monitor: its input is read "
+                                             "through it)")
+    fl.add_argument("--out", type=Path, required=True, help="folder for the run files")
+    fl.add_argument("--set", dest="run_set", choices=("training", "calibration"), default="training",
+                    help="training: the predictor's runs on worlds 30-199; calibration: the model's own nominal "
+                         "driving on the calibration worlds 200-229, for fit --calibration (default %(default)s)")
+    fl.add_argument("--per-setting", type=int, default=6,
+                    help="runs per perturbation intensity and per degraded model (default %(default)s)")
+    fl.add_argument("--nominal", type=int, default=20,
+                    help="nominal runs (default %(default)s; with --set calibration 30 are about an hour)")
+    fl.add_argument("--workers", type=int, default=1, help="processes driving runs side by side (default %(default)s)")
 
     ev = sub.add_parser("eval", formatter_class=parser.formatter_class, help="measure a monitor (a benchmark)",
                         description="drive held-out nominal runs, perturbed runs and degraded models with the monitor "
@@ -73,7 +95,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.action == "eval":
         return _eval(args)
+    if args.action == "failures":
+        return _failures(args)
     return _fit(args)
+
+
+def _failures(args: argparse.Namespace) -> int:
+    import sys
+
+    from tools.monitoreval.calibruns import calibration_runs
+    from tools.monitoreval.failruns import collect_failures
+    from tools.monitoreval.runset import failure_training_runs
+
+    if not args.model.is_file():
+        raise CommandError(f"no model at {args.model}")
+    if args.per_setting < 0 or args.nominal < 0 or args.per_setting + args.nominal == 0 or args.workers < 1:
+        raise CommandError("--per-setting and --nominal must be >= 0 (not both 0), --workers >= 1")
+    import logging
+
+    if not logging.getLogger().isEnabledFor(logging.DEBUG):
+        logging.getLogger("drive_server.monitor").setLevel(logging.ERROR)
+    specs = calibration_runs(args.nominal) if args.run_set == "calibration" else \
+        failure_training_runs(args.per_setting, args.nominal)
+
+    def progress(done: int, total: int, what: str) -> None:
+        print(f"run {done} of {total}: {what}", file=sys.stderr, flush=True)
+
+    files = collect_failures(specs, args.model, args.out, args.workers, progress)
+    print(f"wrote {len(files)} runs to {args.out}")
+    return 0
 
 
 def _eval(args: argparse.Namespace) -> int:

@@ -13,6 +13,11 @@ from typing import Any
 NOMINAL_WORLDS = range(300, 400)
 #: Built-in tracks driven as nominal runs besides the worlds (several spawn seeds each).
 NOMINAL_TRACKS = ("lake", "mountain")
+#: World seeds of the failure predictor's own runs (rbc monitor failures): the steering model's training range,
+#: apart from the monitor's calibration 200-229 and the benchmark's 300-399 worlds.
+FAILURE_WORLDS = range(30, 200)
+#: Axes the failure predictor never learns from, so the benchmark shows it on a kind of failure it never saw.
+HELD_OUT_AXES = ("sun", "unseen_world")
 #: World seeds of the evaluation range (never trained or calibrated on): the unseen-world runs.
 UNSEEN_WORLDS_FIRST = 1_000_000
 
@@ -83,4 +88,40 @@ def failing_runs(per_setting: int) -> list[RunSpec]:
             track = "lake" if k % 2 == 0 else f"world:{NOMINAL_WORLDS[(k * 11) % len(NOMINAL_WORLDS)]}"
             out.append(RunSpec(f"noise{sigma:g}-{k}", "degraded", "weight_noise", sigma, track, seed=200 + k,
                                weight_noise=sigma))
+    return out
+
+
+#: The failure predictor's settings: harsher than the benchmark's, so the steering model, which drives its own
+#: training worlds well, fails often enough to learn from (axis -> intensities); the held-out axes are not here.
+FAILURE_SETTINGS: dict[str, tuple[float, ...]] = {
+    "weight_noise": (0.3, 0.5, 0.7),
+    "yaw": (40.0, -40.0),
+    "cones": (20.0, 30.0),
+    "light": (0.08, 6.0),
+}
+
+
+def failure_training_runs(per_setting: int, nominal: int) -> list[RunSpec]:
+    """The failure predictor's runs: ``per_setting`` runs of each of :data:`FAILURE_SETTINGS` and ``nominal``
+    nominal runs, all on worlds of :data:`FAILURE_WORLDS` (no built-in track, no benchmark or calibration world,
+    no evaluation world)."""
+    out, k = [], 0
+    worlds = list(FAILURE_WORLDS)
+
+    def world() -> str:
+        nonlocal k
+        k += 1
+        return f"world:{worlds[(k * 37) % len(worlds)]}"
+
+    for axis, values in FAILURE_SETTINGS.items():
+        for value in values:
+            for i in range(per_setting):
+                name = f"train-{'noise' if axis == 'weight_noise' else axis}{value:g}-{i}"
+                out.append(RunSpec(name, "degraded" if axis == "weight_noise" else "perturbed", axis, value, world(),
+                                   seed=500 + i, light_intensity=value if axis == "light" else 1.0,
+                                   yaw_offset_deg=value if axis == "yaw" else 0.0,
+                                   cones=int(value) if axis == "cones" else 0,
+                                   weight_noise=value if axis == "weight_noise" else 0.0))
+    for i in range(nominal):
+        out.append(RunSpec(f"train-nominal-{i}", "nominal", "none", 0.0, world(), seed=700 + i))
     return out
