@@ -368,8 +368,8 @@ def test_a_bundled_models_recipe_gives_what_its_onnx_file_records(name) -> None:
     full = resolved(config)
     recorded = {"arch": info["arch"], "behavior": info["behavior"], "approach": info["approach"], "seed": info["seed"],
                 "epochs": info["epochs"], "split": info.get("split", "random"), "export": info.get("export", "last"),
-                "mirror_average": info.get("mirror_average", False), "gain": info.get("gain", info.get("output_scale", 1.0)),
-                "smoothing": info.get("serve_smooth", 1.0)}
+                "mirror_average": info.get("mirror_average", False),
+                "gain": info.get("gain", info.get("output_scale", 1.0)), "smoothing": info.get("serve_smooth", 1.0)}
     assert {k: getattr(full, k) for k in recorded} == recorded
     assert PreprocessContract.from_json(meta[METADATA_KEY]) == config.pipeline().contract
 
