@@ -12,6 +12,10 @@ import io
 import pstats
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
+
+if TYPE_CHECKING:
+    from tools.envs import DriveEnv
 
 
 @dataclass(frozen=True)
@@ -23,9 +27,12 @@ class EnvBenchResult:
     wall_steps_per_s: float
     cpu_steps_per_s: float
     resets: int  # episodes that ended inside the measurement (each reset's cost is included)
+    observation: str = "frame"
 
     def row(self) -> str:
         wire = "JPEG round trip" if self.jpeg else "rendered frame"
+        if self.observation == "model":
+            wire = "64x64 model input"
         return (f"{self.track:<12} {self.cameras} camera{'s' if self.cameras > 1 else ' '}  {wire:<16} "
                 f"{self.wall_steps_per_s:>8,.0f} {self.cpu_steps_per_s:>10,.0f}  {self.resets:>6}")
 
@@ -44,13 +51,13 @@ def _drive(env, info: dict, steps: int) -> tuple[dict, int]:
 
 
 def bench_env(track: str, cameras: int = 1, jpeg: bool = True, steps: int = 2000, repeats: int = 3,
-              warmup: int = 200, seed: int = 0) -> EnvBenchResult:
+              warmup: int = 200, seed: int = 0, observation: str = "frame") -> EnvBenchResult:
     """Steps per second of ``gymnasium.make("rbc/Drive-v0", track=track, ...)``: the best of ``repeats`` runs."""
     import gymnasium as gym
 
     import tools.envs  # noqa: F401  (registers rbc/Drive-v0)
 
-    env = gym.make("rbc/Drive-v0", track=track, cameras=cameras, jpeg=jpeg)
+    env = gym.make("rbc/Drive-v0", track=track, cameras=cameras, jpeg=jpeg, observation=observation)
     try:
         _, info = env.reset(seed=seed)
         info, _ = _drive(env, info, warmup)  # world textures, caches, first touches of memory
@@ -63,7 +70,76 @@ def bench_env(track: str, cameras: int = 1, jpeg: bool = True, steps: int = 2000
             resets += n
     finally:
         env.close()
-    return EnvBenchResult(track, cameras, jpeg, steps, max(wall), max(cpu), resets)
+    return EnvBenchResult(track, cameras, jpeg, steps, max(wall), max(cpu), resets, observation)
+
+
+@dataclass(frozen=True)
+class WorldsBenchResult:
+    """The same episodes with their worlds built as they are drawn, or already built."""
+
+    label: str
+    episodes: int
+    steps: int  # per episode
+    wall_s: float  # per episode
+    cpu_s: float  # per episode (the background thread's included)
+    builds: int  # worlds built during the timed episodes
+    waits: int  # resets that waited for a background build
+
+    def row(self, base: WorldsBenchResult | None = None) -> str:
+        extra = ""
+        if base is not None:
+            extra = f"{100 * (self.wall_s / base.wall_s - 1):>+7.1f} % {100 * (self.cpu_s / base.cpu_s - 1):>+7.1f} %"
+        return f"{self.label:<30} {self.wall_s:>7.2f} {self.cpu_s:>7.2f} {self.builds:>6} {self.waits:>5}  {extra}"
+
+
+WORLDS_HEADER = f"{'worlds':<30} {'wall s':>7} {'CPU s':>7} {'builds':>6} {'waits':>5}  {'wall':>9} {'CPU':>9}"
+
+
+def bench_worlds(episodes: int = 6, steps: int = 1000, first_seed: int = 100, seed: int = 0, pool: int = 1,
+                 new_world_every: int = 1) -> list[WorldsBenchResult]:
+    """Seconds per episode of ``steps`` autopilot steps from a random spawn, with ``worlds=`` drawing generated
+    worlds (seeds from ``first_seed`` on; default: a new one every episode): built in the background while the
+    episode before runs (prefetch), built at the reset, and already built (the same episodes again, every world
+    in the cache: the baseline). Track files are generated before the clock starts (once per machine)."""
+    import gymnasium as gym
+    import numpy as np
+
+    import tools.envs  # noqa: F401
+    from tools.envs.drive_env import WORLD_STREAM
+    from tools.envs.worlds import WorldDistribution, track_path
+
+    dist = WorldDistribution(seeds=(first_seed, first_seed + 999), light=None, fog=None, pool=pool,
+                             new_world_every=new_world_every)
+    rng = np.random.default_rng([seed, WORLD_STREAM])
+    for _ in range(pool + episodes + 2):  # the files of the worlds the episodes may draw (and a few more)
+        track_path(dist.draw_world(rng)[0], dist.themes)
+    results: list[WorldsBenchResult] = []
+    for label, prefetch in (("built in the background", True), ("built at the reset", False)):
+        env = gym.make("rbc/Drive-v0", spawn="random", max_episode_steps=steps, terminate_on_takeover=False,
+                       worlds={**dist.__dict__, "prefetch": prefetch})
+        drive = cast("DriveEnv", env.unwrapped)
+        drive.worlds.clear()  # every world built afresh
+        drive.worlds.size = max(drive.worlds.size, pool + episodes + 2)  # the second pass finds them all built
+        try:
+            for name in [label, "already built"] if prefetch else [label]:
+                _, info = env.reset(seed=seed)  # the first world: built before the clock starts
+                drive.worlds.wait()
+                builds0, waits0 = drive.worlds.builds, drive.worlds.waits
+                t0, c0 = time.perf_counter(), time.process_time()
+                for _ in range(episodes):
+                    for _ in range(steps):
+                        _, _, terminated, truncated, info = env.step(info["expert_action"])
+                        if terminated or truncated:
+                            break
+                    _, info = env.reset()
+                drive.worlds.wait()
+                wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                results.append(WorldsBenchResult(name, episodes, steps, wall / episodes, cpu / episodes,
+                                                 drive.worlds.builds - builds0, drive.worlds.waits - waits0))
+        finally:
+            env.close()
+            drive.worlds.clear()
+    return [results[1], results[0], results[2]]  # the baseline first
 
 
 def profile_env(track: str, steps: int, jpeg: bool = True, top: int = 15, seed: int = 0) -> str:

@@ -13,28 +13,51 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=2000, help="steps per timing run (default 2000)")
     parser.add_argument("--repeats", type=int, default=3, help="timing runs; the best is reported (default 3)")
     parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1: per-core numbers)")
+    parser.add_argument("--worlds", type=int, default=0, metavar="N",
+                        help="also time N episodes with a new generated world each (worlds=...), against the same "
+                             "episodes with their worlds already built")
+    parser.add_argument("--episode-steps", type=int, default=1000, metavar="STEPS",
+                        help="steps of each episode of --worlds (default 1000: 67 simulated seconds)")
+    parser.add_argument("--pool", type=int, default=1, metavar="P",
+                        help="worlds in play at once with --worlds (default 1: a new world every episode)")
+    parser.add_argument("--new-world-every", type=int, default=1, metavar="E",
+                        help="episodes between new worlds with --worlds (default 1)")
     parser.add_argument("--profile", type=int, default=0, metavar="N",
                         help="also profile N steps on the first track (cProfile, by time of their own)")
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.steps < 1 or args.repeats < 1 or args.threads < 1 or args.profile < 0:
-        raise CommandError("--steps, --repeats and --threads must be >= 1, --profile >= 0")
+    if min(args.steps, args.repeats, args.threads, args.episode_steps, args.pool, args.new_world_every) < 1 \
+            or args.profile < 0 or args.worlds < 0:
+        raise CommandError("--steps, --repeats, --threads, --episode-steps, --pool and --new-world-every must be "
+                           ">= 1, --profile and --worlds >= 0")
     try:
         import gymnasium  # noqa: F401
     except ModuleNotFoundError as exc:
         raise CommandError("rbc env-bench needs the package 'gymnasium'", 'pip install -e ".[gym]"') from exc
     import cv2
 
-    from tools.bench.envs import HEADER, bench_env, profile_env
+    from tools.bench.envs import HEADER, WORLDS_HEADER, bench_env, bench_worlds, profile_env
 
     cv2.setNumThreads(args.threads)
     print(f"rbc env-bench: rbc/Drive-v0, autopilot driving, OpenCV threads {args.threads}, "
           f"best of {args.repeats} x {args.steps} steps")
     print(HEADER)
     for track in args.tracks:
-        for cameras, jpeg in ((1, True), (1, False), (3, True)):
-            print(bench_env(track, cameras, jpeg, args.steps, args.repeats).row(), flush=True)
+        for cameras, jpeg, observation in ((1, True, "frame"), (1, False, "frame"), (3, True, "frame"),
+                                           (1, True, "model")):
+            print(bench_env(track, cameras, jpeg, args.steps, args.repeats, observation=observation).row(),
+                  flush=True)
+    if args.worlds:
+        every = "every episode" if args.new_world_every == 1 else f"every {args.new_world_every} episodes"
+        print(f"\nseconds per episode of {args.episode_steps} steps from a random spawn, {args.worlds} episodes, "
+              f"pool of {args.pool} generated world{'s' if args.pool > 1 else ''}, a new one {every}:")
+        print(WORLDS_HEADER)
+        base, *others = bench_worlds(args.worlds, args.episode_steps, pool=args.pool,
+                                     new_world_every=args.new_world_every)
+        print(base.row())
+        for result in others:
+            print(result.row(base), flush=True)
     if args.profile:
         print(f"\ncProfile of {args.profile} steps on {args.tracks[0]} (one camera, JPEG round trip):")
         print(profile_env(args.tracks[0], args.profile))

@@ -59,10 +59,11 @@ from tools.envs.config import DriveEnvConfig, RewardConfig
 from tools.envs.drive_env import DriveEnv
 from tools.envs.expert import ExpertPolicy
 from tools.envs.policy import OnnxPolicy
+from tools.envs.worlds import WorldDistribution
 
 ENV_ID = "rbc/Drive-v0"
 
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="tools.envs.drive_env:make")  # DriveEnv; "human": in a window
 
-__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardConfig"]
+__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardConfig", "WorldDistribution"]

@@ -20,6 +20,7 @@ import numpy as np
 from protocol import SpeedUnit, SteerCommand, encode_telemetry, parse_number
 from protocol.jpeg import decode_jpeg, encode_jpeg
 from protocol.units import from_kmh, to_kmh
+from tools.envs.worlds import BuiltWorld, WorldKey, with_fog
 from tools.sim.driving.autopilot import Autopilot, AutopilotParams
 from tools.sim.driving.rules import angle_diff
 from tools.sim.driving.scenario import ScenarioConfig
@@ -43,6 +44,16 @@ class StepReport:
     time_out: bool  # the lap's time limit ran out
     distance_m: float = 0.0  # metres driven over the ground, in any direction
     abs_cte_distance_m2: float = 0.0  # the integral of |cte| (from the car's line) over those metres
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One episode's world, drawn by the environment: the built world and the light and fog to see it in."""
+
+    key: WorldKey
+    built: BuiltWorld
+    light_intensity: float = 1.0
+    fog: float = 1.0  # times the world's own fog density
 
 
 @dataclass(frozen=True)
@@ -84,20 +95,30 @@ class HeadlessSimClient:
             raise RuntimeError("HeadlessSimClient.start() was not called")
         return self._view
 
-    def start(self, seed: int, spawn_s: float | None = None, spawn_noise: bool = True, cone_seed: int = 0) -> None:
+    def start(self, seed: int, spawn_s: float | None = None, spawn_noise: bool = True, cone_seed: int = 0,
+              world: Episode | None = None) -> None:
         """A new run: the car at ``spawn_s`` metres along the track (None: the start line), ``seed`` drawing the
-        spawn's noise, the camera bumps, the track's per-frame look and the autopilot's driving line."""
+        spawn's noise, the camera bumps, the track's per-frame look and the autopilot's driving line; ``world``:
+        this run's world, sun, light and fog (None: the client's own track, built as ``rbc sim`` builds it)."""
         config = replace(self.base, seed=seed, spawn_s=spawn_s, spawn_noise=spawn_noise, cone_seed=cone_seed)
-        self.sim = sim = Simulation(config)
+        if world is None:
+            self.sim = sim = Simulation(config)
+        else:
+            config = replace(config, track=world.built.path, light_intensity=world.light_intensity,
+                             light_direction_deg=world.key.sun_deg)
+            self.sim = sim = Simulation(config, render=False)
+            from tools.sim.render.renderer import Renderer
+
+            sim.renderer = Renderer(with_fog(world.built.world, world.fog), seed=config.seed, rig=config.camera)
         self.expert = Autopilot(sim.track, sim.direction, sim.cones,
                                 replace(AutopilotParams(), speed_kmh=config.speed_limit_kmh), sim.params, seed=seed)
         self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
 
-    def random_spawn_s(self, rng: np.random.Generator) -> float:
-        """A spawn point anywhere along the track, drawn from ``rng``."""
+    def random_spawn_s(self, rng: np.random.Generator, track: str | None = None) -> float:
+        """A spawn point anywhere along the track (None: the client's own), drawn from ``rng``."""
         from tools.sim.track.files import get_track
 
-        return float(rng.uniform(0.0, get_track(self.base.track).length))
+        return float(rng.uniform(0.0, get_track(track or self.base.track).length))
 
     # --- stepping -----------------------------------------------------------------------------------
     def step(self, command: SteerCommand, frames: int) -> StepReport:
@@ -156,10 +177,12 @@ class HeadlessSimClient:
     def wire(self, rgb: np.ndarray) -> tuple[np.ndarray, bytes]:
         """A frame as it arrives over the wire: JPEG at the track's quality (75 like Unity's), decoded by THE
         decode (``protocol.jpeg``), and its JPEG bytes; with ``jpeg=False`` the rendered frame and no bytes."""
-        if not self.jpeg:
-            return rgb, b""
-        data = encode_jpeg(rgb, self._sim.jpeg_quality)
-        return decode_jpeg(data), data
+        data = self.encode(rgb)
+        return (decode_jpeg(data), data) if data else (rgb, data)
+
+    def encode(self, rgb: np.ndarray) -> bytes:
+        """The frame's JPEG as the wire would carry it (the track's quality); ``b""`` with ``jpeg=False``."""
+        return encode_jpeg(rgb, self._sim.jpeg_quality) if self.jpeg else b""
 
     # --- ground truth -------------------------------------------------------------------------------
     def wire_speed(self) -> float:

@@ -10,14 +10,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
+from drive_server.contract import PreprocessContract
 from drive_server.control import ControlLaw
 from protocol.errors import BadValue
 from tools.envs.client import StepReport
+from tools.envs.worlds import WorldDistribution
 from tools.sim.driving.scenario import ScenarioConfig
 from tools.sim.render.camera import RIGS
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS
 
 CONTROLS = ("steer", "steer_throttle")
+OBSERVATIONS = ("frame", "model")
+#: observation="model"'s default contract per camera rig: generalist.onnx's for the real simulator's camera
+#: (rows 64-136, below the horizon and above the bonnet, to 64x64 RGB; JPEG decoded at half size), the
+#: paper's whole frame to 64x64 for the classic rig
+MODEL_CONTRACTS = {"unity": PreprocessContract(crop_top=64, crop_bottom=136, decode_reduce=2),
+                   "classic": PreprocessContract()}
 PURPOSES = ("train", "eval")
 SPAWNS = ("start", "random")
 
@@ -111,6 +119,17 @@ class DriveEnvConfig:
     # an ONNX model file carrying a misbehaviour monitor (rbc monitor fit): each observation is scored as
     # drive_server --monitor warn scores a frame, and info["monitor"] holds its score, one-second mean and state
     monitor: str | None = None
+    # domain randomisation: a new world, sun, light and fog per episode (tools.envs.worlds.WorldDistribution,
+    # a dict of its fields, or True for its defaults); only training worlds are ever drawn
+    worlds: WorldDistribution | None = None
+    # "frame": the camera's 160x320 frame; "model": the network's own input (crop, resize, colour of the
+    # preprocessing contract, from the JPEG decoded as drive_server decodes it), uint8
+    observation: str = "frame"
+    # the preprocessing contract of observation="model": None (generalist.onnx's for the unity rig: rows
+    # 64-136 to 64x64 RGB; the paper's whole frame to 64x64 for classic), a PreprocessContract, a dict of its
+    # fields or an .onnx model file (its contract)
+    contract: PreprocessContract | None = None
+    speed: bool = False  # True: a Dict observation of the camera(s) and "speed" (km/h, as the telemetry says)
 
     def __post_init__(self) -> None:
         _choice("camera", self.camera, tuple(RIGS))
@@ -141,8 +160,18 @@ class DriveEnvConfig:
         if self.track is not None and self.world_seed is not None:
             raise BadValue("give track or world_seed, not both",
                            "world_seed=S is the procedural world S; track='world:S' names the same world")
+        _choice("observation", self.observation, OBSERVATIONS)
+        if not isinstance(self.speed, bool):
+            raise BadValue(f"speed must be True or False, got {self.speed!r}")
+        if self.worlds is not None and (self.track is not None or self.world_seed is not None):
+            raise BadValue("give track/world_seed or worlds, not both",
+                           "worlds draws the world of every episode; tracks=('lake',) puts a built-in one in the draw")
         object.__setattr__(self, "reward", RewardConfig.of(self.reward))
         object.__setattr__(self, "law", _law_of(self.law))
+        object.__setattr__(self, "worlds", WorldDistribution.of(self.worlds))
+        if self.contract is not None and self.observation != "model":
+            raise BadValue("contract sets the preprocessing of observation='model'; give both or neither")
+        object.__setattr__(self, "contract", _contract_of(self.contract, self.camera))
 
     @property
     def track_name(self) -> str:
@@ -167,6 +196,27 @@ def _law_of(value: object) -> ControlLaw:
     if unknown:
         raise BadValue(f"unknown law option(s): {', '.join(map(str, unknown))}", f"known: {', '.join(known)}")
     return ControlLaw(**value)
+
+
+def _contract_of(value: object, camera: str) -> PreprocessContract:
+    """The contract of observation="model" (see :attr:`DriveEnvConfig.contract`); one line when it is bad."""
+    from pathlib import Path
+
+    if value is None:
+        return MODEL_CONTRACTS.get(camera, PreprocessContract())
+    if isinstance(value, PreprocessContract):
+        return value
+    if isinstance(value, dict):
+        known = [f.name for f in fields(PreprocessContract)]
+        unknown = sorted(map(str, set(value) - set(known)))
+        if unknown:
+            raise BadValue(f"unknown contract option(s): {', '.join(unknown)}", f"known: {', '.join(known)}")
+        return PreprocessContract(**value)
+    if isinstance(value, str | Path) and str(value).endswith(".onnx"):
+        from drive_server.model import SteeringModel
+
+        return SteeringModel(Path(value)).contract
+    raise BadValue(f"contract must be a PreprocessContract, a dict of its fields or an .onnx file, got {value!r}")
 
 
 def _choice(name: str, value: object, allowed: tuple[str, ...]) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 from collections import deque
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,18 +17,85 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from drive_server.preprocess import frame_to_network_image, jpeg_reduction
 from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
 from protocol.errors import BadValue, UserError
-from tools.envs.client import HeadlessSimClient
+from protocol.jpeg import decode_jpeg
+from tools.envs.client import Episode, HeadlessSimClient
 from tools.envs.config import config_from_kwargs, resolve_track
+from tools.envs.worlds import WorldKey, shared_cache
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
+    from drive_server.contract import PreprocessContract
     from drive_server.monitor import ClientMonitor
     from drive_server.pipeline import DrivePipeline
 
 FRAME_SHAPE = (FRAME_HEIGHT, FRAME_WIDTH, 3)
+#: the speed observation's upper bound (km/h): the simulated car's top speed
+MAX_SPEED_KMH = 130.0
+#: the distribution's stream of worlds, apart from the episode's own draws (np_random)
+WORLD_STREAM = 0x3D1
+#: what ``reset(options=...)`` may pin for one episode
+RESET_OPTIONS = ("spawn_s", "cone_seed", "track", "world_seed", "themes", "sun_deg", "light_intensity", "fog")
+
+
+def check_reset_options(options: dict[str, Any] | None, purpose: str) -> dict[str, Any]:
+    """``reset``'s options, checked and normalised (``world_seed`` becomes ``track="world:SEED"``); every bad one
+    is a BadValue of one line, before anything changes."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise BadValue(f"reset options must be a dict, got {options!r}")
+    unknown = sorted(map(str, set(options) - set(RESET_OPTIONS)))
+    if unknown:
+        raise BadValue(f"unknown reset option(s): {', '.join(unknown)} (known: {', '.join(RESET_OPTIONS)})")
+    pinned = dict(options)
+    numbers = {"spawn_s": ("a finite number", lambda v: True),
+               "sun_deg": ("an angle in [-90, 90]", lambda v: -90 <= v <= 90),
+               "light_intensity": ("a number >= 0", lambda v: v >= 0), "fog": ("a number > 0", lambda v: v > 0)}
+    for name, (bounds, ok) in numbers.items():
+        value = pinned.get(name)
+        if value is None:
+            pinned.pop(name, None)
+            continue
+        if not isinstance(value, int | float) or isinstance(value, bool) or not np.isfinite(value) or not ok(value):
+            raise BadValue(f"reset option {name} must be {bounds}, got {value!r}")
+        pinned[name] = float(value)
+    for name in ("cone_seed", "world_seed"):
+        value = pinned.get(name)
+        if value is not None and (not isinstance(value, int | np.integer) or isinstance(value, bool) or value < 0):
+            raise BadValue(f"reset option {name} must be an integer >= 0, got {value!r}")
+    if "world_seed" in pinned and pinned.get("track") is not None:
+        raise BadValue("reset options: give track or world_seed, not both")
+    if pinned.get("world_seed") is not None:
+        pinned["track"] = f"world:{int(pinned.pop('world_seed'))}"
+    pinned.pop("world_seed", None)
+    track = pinned.get("track")
+    if track is not None:
+        if not isinstance(track, str) or not track:
+            raise BadValue(f"reset option track must be a track name, file or world:SEED, got {track!r}")
+        from tools.sim.collect.worlds import training_seed_problem
+        from tools.sim.track.files import world_seed_of
+
+        seed = world_seed_of(track)
+        problem = training_seed_problem(seed, 1) if seed is not None and purpose == "train" else None
+        if problem:
+            raise BadValue(f"reset option track={track}: {problem}", "make the environment with purpose='eval' "
+                                                                    "to evaluate on it (never train on it)")
+    else:
+        pinned.pop("track", None)
+    if "themes" in pinned:
+        from tools.envs.worlds import _strings
+        from tools.sim.track.road import THEMES
+
+        themes = _strings("reset option themes", pinned["themes"])
+        if not themes or set(themes) - set(THEMES):
+            raise BadValue(f"reset option themes must be a non-empty list of {', '.join(THEMES)}, "
+                           f"got {pinned['themes']!r}")
+        pinned["themes"] = tuple(sorted(set(themes)))
+    return pinned
 
 
 class EnvClosedError(BadValue, gym.error.ClosedEnvironmentError):
@@ -65,9 +133,10 @@ class DriveEnv(gym.Env):
         self.config = config = config_from_kwargs(kwargs)
         self.metadata = {**self.metadata, "render_fps": config.control_hz}
         self.law = config.law
-        frame = spaces.Box(0, 255, FRAME_SHAPE, np.uint8)
+        assert config.contract is not None  # DriveEnvConfig always sets one
+        self.contract: PreprocessContract = config.contract
         self.camera_names = CAMERAS if config.cameras == 3 else ("center",)
-        self.observation_space = spaces.Dict({c: frame for c in self.camera_names}) if config.cameras == 3 else frame
+        self.observation_space = self._observation_space()
         size = 1 if config.control == "steer" else 2
         self.action_space: spaces.Box = spaces.Box(-1.0, 1.0, (size,), np.float32)
         self.client = HeadlessSimClient(
@@ -81,23 +150,38 @@ class DriveEnv(gym.Env):
         self._closed = False
         self._last_info: dict[str, Any] | None = None  # the last step's, until reset() (see _relabel_auto_reset)
         self._monitor_pipeline, self._monitor = self._load_monitor(config.monitor)
+        self.worlds = shared_cache(config.worlds.pool + 2 if config.worlds else 1)
+        self._world_rng: np.random.Generator | None = None  # the distribution's draws of worlds (see reset)
+        self._next_world: tuple[str, float] | None = None  # drawn for the next episode (being prefetched)
+        self._episodes = 0  # drawn from the distribution since the last reset with a seed
+        self._pool: list[tuple[str, float]] = []  # the distribution's worlds (and suns) in play, oldest first
+        self._episode: Episode | None = None  # this episode's world, light and fog (None: the env's track)
+        self._reduce = jpeg_reduction(self.contract)
 
     # --- the Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """A new episode; ``seed`` makes it and every step after it reproducible. ``options``: ``spawn_s``
-        (metres along the track to start at), ``cone_seed`` (the cones' layout, with ``cones=N``)."""
+        """A new episode; ``seed`` makes it and every step after it reproducible. ``options`` pin this episode's
+        draws (:data:`RESET_OPTIONS`): ``spawn_s`` (metres along the track to start at), ``cone_seed`` (the
+        cones' layout, with ``cones=N``), ``track`` or ``world_seed`` (the world; held-out ones only with
+        ``purpose="eval"``) and ``themes``, ``sun_deg``, ``light_intensity``, ``fog``."""
+        pinned = check_reset_options(options, self.config.purpose)
         super().reset(seed=seed)
         self._closed = False
-        options = dict(options or {})
-        unknown = sorted(set(options) - {"spawn_s", "cone_seed"})
-        if unknown:
-            raise BadValue(f"unknown reset option(s): {', '.join(unknown)} (known: spawn_s, cone_seed)")
         run_seed = int(self.np_random.integers(1, 2**31 - 1))  # never 0: the simulator's "no spawn noise" seed
-        spawn_s = options.get("spawn_s")
+        self._episode = episode = self._draw_episode(seed, pinned)
+        spawn_s = pinned.get("spawn_s")
         if spawn_s is None and self.config.spawn == "random":
-            spawn_s = self.client.random_spawn_s(self.np_random)
+            spawn_s = self.client.random_spawn_s(self.np_random, episode.built.path if episode else None)
+        if episode is not None and self.config.worlds is not None:  # after the spawn: as without a distribution
+            episode = self._episode = replace(
+                episode, light_intensity=pinned.get("light_intensity",
+                                                    self.config.worlds.draw_light(self.np_random,
+                                                                                  self.config.light_intensity)),
+                fog=pinned.get("fog", self.config.worlds.draw_fog(self.np_random)))
         self.client.start(run_seed, spawn_s=None if spawn_s is None else float(spawn_s),
-                          spawn_noise=self.config.spawn_noise, cone_seed=int(options.get("cone_seed", 0)))
+                          spawn_noise=self.config.spawn_noise, cone_seed=int(pinned.get("cone_seed", 0)),
+                          world=episode)
+        self._prefetch()
         self._pending = deque([SteerCommand(0.0, 0.0)] * self.config.action_delay)
         self._steps = 0
         if self._monitor_pipeline is not None:
@@ -141,6 +225,59 @@ class DriveEnv(gym.Env):
         self._closed = True
         self.client.sim = None
         self.client.expert = None
+        self._episode = None  # its world stays in the process's cache for the next environment
+
+    # --- the world of an episode --------------------------------------------------------------------
+    def _draw_episode(self, seed: int | None, pinned: dict[str, Any]) -> Episode | None:
+        """This episode's world: pinned by the options, drawn from the distribution's pool or None (the env's own
+        track, built as ``rbc sim`` builds it)."""
+        dist = self.config.worlds
+        if dist is not None and (seed is not None or self._world_rng is None):
+            # the worlds' own stream: the same worlds for a seed, whatever the episodes did with np_random
+            entropy = seed if seed is not None else int(self.np_random.integers(2**62))
+            self._world_rng = np.random.default_rng([entropy, WORLD_STREAM])
+            self._episodes, self._next_world = 0, None
+            self._pool = [dist.draw_world(self._world_rng) for _ in range(dist.pool)]
+        track, sun = pinned.get("track"), pinned.get("sun_deg")
+        if track is None and dist is not None:
+            assert self._world_rng is not None  # seeded above
+            if self._episodes and self._episodes % dist.new_world_every == 0:  # a new world, driven at once
+                self._pool = [*self._pool[1:], self._next_world or dist.draw_world(self._world_rng)]
+                self._next_world = None
+                track, drawn_sun = self._pool[-1]
+            else:
+                track, drawn_sun = self._pool[int(self._world_rng.integers(len(self._pool)))]
+            self._episodes += 1
+            sun = drawn_sun if sun is None else sun
+        elif track is None:
+            if not {"sun_deg", "light_intensity", "fog"} & set(pinned):
+                return None
+            track = self.config.track_name
+        key = self._world_key(track, sun or 0.0, pinned.get("themes"), int(pinned.get("cone_seed", 0)))
+        return Episode(key, self.worlds.get(key), pinned.get("light_intensity", self.config.light_intensity),
+                       pinned.get("fog", 1.0))
+
+    def _world_key(self, track: str, sun: float, themes: tuple[str, ...] | None = None,
+                   cone_seed: int = 0) -> WorldKey:
+        from tools.sim.track.files import world_seed_of
+
+        if themes is None and self.config.worlds is not None:
+            themes = self.config.worlds.themes
+        return WorldKey(track, themes if world_seed_of(track) is not None else None, float(sun), self.config.cones,
+                        cone_seed)
+
+    def _prefetch(self) -> None:
+        """Build in the background the pool's worlds not built yet and the world the next reset (without a seed)
+        brings into the pool, while this episode runs."""
+        dist, rng = self.config.worlds, self._world_rng
+        if dist is None or not dist.prefetch or rng is None:
+            return
+        for track, sun in self._pool:
+            self.worlds.prefetch(self._world_key(track, sun))
+        if self._episodes % dist.new_world_every == 0:
+            if self._next_world is None:
+                self._next_world = dist.draw_world(rng)  # the next reset's draw, taken now
+            self.worlds.prefetch(self._world_key(*self._next_world))
 
     # --- what the agent gets ------------------------------------------------------------------------
     def command(self, action: ArrayLike) -> SteerCommand:
@@ -184,17 +321,36 @@ class DriveEnv(gym.Env):
             last["terminal_expert_action"] = last["expert_action"]
             last["expert_action"] = info["expert_action"].copy()
 
+    def _observation_space(self) -> spaces.Space[Any]:
+        config = self.config
+        shape = FRAME_SHAPE if config.observation == "frame" else (self.contract.height, self.contract.width, 3)
+        image = spaces.Box(0, 255, shape, np.uint8)
+        if config.cameras == 1 and not config.speed:
+            return image
+        parts: dict[str, spaces.Space[Any]] = {c: image for c in self.camera_names}
+        if config.speed:
+            parts["speed"] = spaces.Box(0.0, MAX_SPEED_KMH, (1,), np.float32)
+        return spaces.Dict(parts)
+
     def _observe(self) -> tuple[np.ndarray | dict[str, np.ndarray], bytes]:
         frames = self.client.render()
         self._frame = frames["center"]
-        seen = {}
+        seen: dict[str, np.ndarray] = {}
         jpeg = b""
+        model = self.config.observation == "model"
         for name, rgb in frames.items():
-            seen[name], data = self.client.wire(rgb)
+            if model:
+                data = self.client.encode(rgb)
+                image = decode_jpeg(data, self._reduce) if data else rgb  # as drive_server decodes for the model
+                seen[name] = frame_to_network_image(image, self.contract)
+            else:
+                seen[name], data = self.client.wire(rgb)
             if name == "center":
                 jpeg = data
-        obs = seen if self.config.cameras == 3 else seen["center"]
-        return obs, jpeg
+        if self.config.speed:
+            speed = min(max(self.client.wire_speed_kmh(), 0.0), MAX_SPEED_KMH)
+            return {**seen, "speed": np.array([speed], np.float32)}, jpeg
+        return (seen if self.config.cameras == 3 else seen["center"]), jpeg
 
     def _info(self, intervention: str, laps_done: bool, jpeg: bytes) -> dict[str, Any]:
         info: dict[str, Any] = self.client.truth()
@@ -202,6 +358,12 @@ class DriveEnv(gym.Env):
         info["intervention"] = intervention
         info["laps_done"] = laps_done
         info["step"] = self._steps
+        episode = self._episode
+        info["world"] = episode.key.track if episode else self.config.track_name
+        if episode is not None and self.config.worlds is not None or self._steps == 0:
+            info["light_intensity"] = episode.light_intensity if episode else self.config.light_intensity
+            info["fog"] = episode.fog if episode else 1.0
+            info["sun_deg"] = episode.key.sun_deg if episode else 0.0
         if jpeg:
             info["jpeg"] = jpeg  # the centre frame's JPEG as sent on the wire (OnnxPolicy decodes it as drive_server)
         if self._monitor is not None and self._monitor_pipeline is not None and self._frame is not None:
