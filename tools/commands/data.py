@@ -99,7 +99,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     help="also score this model (trained elsewhere) on every recording, beside the folds' models")
     cv.add_argument("--track", choices=TRACKS, default=None, help="only the recordings of this track")
     cv.add_argument("--name", action="append", default=None, metavar="NAME", help="only this recording (repeat)")
-    cv.add_argument("--no-closed-loop", action="store_true", help="open loop only: a few minutes for the 39 public recordings on two cores, where the closed loop takes about 20 (with --peer)")
+    cv.add_argument("--no-closed-loop", action="store_true",
+                    help="open loop only: a few minutes for the 39 public recordings on two cores, where the closed "
+                         "loop takes about 20 (with --peer)")
     add_loop_rule_arguments(cv)  # as rbc drive-log's
     add_smooth_argument(cv)
     cv.add_argument("--workers", type=int, default=2, help="recordings scored at once (default %(default)s)")
