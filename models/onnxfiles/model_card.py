@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import shlex
-import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,6 +18,7 @@ from drive_server.serving import GAIN, GAIN_OLD_NAMES, NO_GAIN, SERVING_KEY, Ser
 from drive_server.smoothing import NAME, OFF, OLD_NAMES
 from models.networks.architectures import ARCHITECTURES
 from models.networks.runfiles import RunPaths, RunRecord
+from models.onnxfiles.card_text import block, command, count, quoted, shown, wrap
 from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT
 
@@ -32,8 +31,6 @@ EXTRAS = {"label_smoothing_frames": 0, "balance_recordings": False, "centre_gain
           "edge_gain": 0.0}
 #: The rig of a model of ours whose record names none: it predates the unity rig.
 LEGACY_RIG = "classic"
-#: Width of the card's lines of prose and of its wrapped commands.
-WIDTH = 110
 
 
 @dataclass(frozen=True)
@@ -91,8 +88,8 @@ def _title(src: CardSource) -> str:
     network = NETWORKS.get(c["arch"], c["arch"])
     purpose = src.purpose or (f"{network[0].upper()}{network[1:]} trained for the {c['behavior']} "
                               f"[behavior]({_link(src, 'glossary.md', 'behavior')}) on "
-                              f"{_count(len(c['data']), 'recording folder')} {filmed}.")
-    return f"# `{src.model.path.name}`: a {c['behavior']} driving model\n\n{_wrap(purpose)}"
+                              f"{count(len(c['data']), 'recording folder')} {filmed}.")
+    return f"# `{src.model.path.name}`: a {c['behavior']} driving model\n\n{wrap(purpose)}"
 
 
 def _what_it_is(src: CardSource) -> str:
@@ -102,21 +99,21 @@ def _what_it_is(src: CardSource) -> str:
              ("Input", _input(src.model.contract or src.record.contract)), ("Camera", _camera(src)),
              ("Training data", _training_data(src.record)), ("Validation", _validation(src.record)),
              ("Training", _training(src)), ("Its answer", _answer(src))]
-    return "## What it is\n\n" + "\n".join(_wrap(f"- **{label}**: {text}", "  ") for label, text in items)
+    return "## What it is\n\n" + "\n".join(wrap(f"- **{label}**: {text}", "  ") for label, text in items)
 
 
 def _how_to_use(src: CardSource) -> str:
-    path = _q(src.model.path)
+    path = quoted(src.model.path)
     text = ("`rbc sim` drives one lap of the headless simulator in-process (`--track world:SEED`: a generated "
             "world); `drive_server` serves the model to the Udacity simulator "
             f"([Drive the Udacity simulator]({_link(src, 'unity.md')})).")
-    return _block("## How to use it", [f"rbc sim --model {path} {src.home}", f"drive_server --model {path}"], text)
+    return block("## How to use it", [f"rbc sim --model {path} {src.home}", f"drive_server --model {path}"], text)
 
 
 def _how_well(src: CardSource) -> str:
-    c, path, stem = src.record.config, _q(src.model.path), src.model.path.stem
-    val = [_shown(v) for v in c.get("val_data", [])]
-    rec = _q(val[0]) if val else "DIR"
+    c, path, stem = src.record.config, quoted(src.model.path), src.model.path.stem
+    val = [shown(v) for v in c.get("val_data", [])]
+    rec = quoted(val[0]) if val else "DIR"
     commands = [f"rbc sim --model {path} {src.home} --json lap.json",
                 f"rbc eval --behavior {c['behavior']} --model {path} --out eval/{stem}",
                 f"rbc eval --behavior {c['behavior']} --model {path} --experiments unseen_worlds --worlds 20 "
@@ -131,7 +128,7 @@ def _how_well(src: CardSource) -> str:
             "paper's eight experiments on the behavior's track, and with `--experiments unseen_worlds` laps of "
             f"generated roads it never saw; `rbc score` (open loop) and `rbc drive-log` (closed loop) use {which}. "
             f"[Evaluate a model]({_link(src, 'evaluate.md')}) says what each answers.")
-    return _block("## How well it drives", commands, text, head)
+    return block("## How well it drives", commands, text, head)
 
 
 def _limits(src: CardSource) -> str:
@@ -147,7 +144,7 @@ def _limits(src: CardSource) -> str:
     if c.get("max_steps_per_epoch"):
         items.append(f"Its epochs were cut to {c['max_steps_per_epoch']} steps (`max_steps_per_epoch`): a quick "
                      "run, not the full schedule.")
-    return "## Known limits\n\n" + "\n".join(_wrap(f"- {item}", "  ") for item in items)
+    return "## Known limits\n\n" + "\n".join(wrap(f"- {item}", "  ") for item in items)
 
 
 def _reproduce(src: CardSource) -> str:
@@ -157,7 +154,7 @@ def _reproduce(src: CardSource) -> str:
     text = "" if src.data_commands else ("It needs the data folders it was trained and validated on: `rbc collect` "
                                          "records headless ones, `rbc data fetch` the public real recordings.")
     commands = [*src.data_commands, _train_command(src, c), *_file_command(src, c)]
-    return _block("## Reproduce", commands, text, head)
+    return block("## Reproduce", commands, text, head)
 
 
 # --- the facts ----------------------------------------------------------------------------------------------------
@@ -222,7 +219,7 @@ def _training(src: CardSource) -> str:
         scale = ", brightness changed relative to the frame's own" if c.get("brightness_mode") == "scale" else ""
         text = (f"the paper's [approach]({link}) (zero-steer balancing with lambda = {r['deletion_rate']:g}, the "
                 f"paper's augmentations{scale})")
-    text += (f", {_count(r['epochs'], 'epoch')} of {r['steps_per_epoch']:,} steps of {c['batch_size']} samples "
+    text += (f", {count(r['epochs'], 'epoch')} of {r['steps_per_epoch']:,} steps of {c['batch_size']} samples "
              f"({c['aug_loops']} augmentation loops), {r.get('optimizer', 'Adam')} at learning rate "
              f"{c['learning_rate']:g}, {r.get('loss', 'MSE')} loss, seed {c['seed']}.")
     extras = [f"`{k} = {json.dumps(c[k])}`" for k, off in EXTRAS.items() if c.get(k, off) != off]
@@ -249,9 +246,9 @@ def _answer(src: CardSource) -> str:
 
 def _train_command(src: CardSource, c: dict[str, Any]) -> str:
     words = ["rbc", "train", "--recipe", src.recipe_name or src.recipe.as_posix()]
-    words += [w for d in c["data"] for w in ("--data", _shown(d))]
-    words += [w for d in c.get("val_data", []) for w in ("--val-data", _shown(d))]
-    return _command([*words, "--out", c["out"]])
+    words += [w for d in c["data"] for w in ("--data", shown(d))]
+    words += [w for d in c.get("val_data", []) for w in ("--val-data", shown(d))]
+    return command([*words, "--out", c["out"]])
 
 
 def _file_command(src: CardSource, c: dict[str, Any]) -> list[str]:
@@ -267,7 +264,7 @@ def _file_command(src: CardSource, c: dict[str, Any]) -> list[str]:
             words += ["--serve-smooth", f"{src.model.smoothing:g}"]
         asked_gain = next((c[k] for k in (GAIN, *GAIN_OLD_NAMES) if k in c), NO_GAIN)
         words += ["--gain", f"{src.model.gain:g}"] if src.model.gain != asked_gain else []
-    return [_command(words)]
+    return [command(words)]
 
 
 # --- wording ------------------------------------------------------------------------------------------------------
@@ -288,49 +285,10 @@ def _folders(record: RunRecord, folders: list[str]) -> str:
     c, logs = record.config, record.logs
     names = [*c["data"], *c.get("val_data", [])]
     rows = {n: log["rows"] for n, log in zip(names, logs, strict=False)} if len(logs) == len(names) else {}
-    return ", ".join(f"`{_shown(f)}`" + (f" ({rows[f]:,} rows)" if f in rows else "") for f in folders)
+    return ", ".join(f"`{shown(f)}`" + (f" ({rows[f]:,} rows)" if f in rows else "") for f in folders)
 
 
 def _link(src: CardSource, page: str, anchor: str = "") -> str:
     """A docs page (``#anchor``) as a link relative to the card's folder."""
     rel = Path(os.path.relpath(DOCS / page, src.recipe.parent.resolve())).as_posix()
     return rel + (f"#{anchor}" if anchor else "")
-
-
-def _block(heading: str, commands: list[str], text: str, head: str = "") -> str:
-    parts = [heading, *([_wrap(head)] if head else []), "```bash\n" + "\n".join(commands) + "\n```"]
-    return "\n\n".join([*parts, *([_wrap(text)] if text else [])])
-
-
-def _command(words: list[str]) -> str:
-    """A shell command, quoted, wrapped onto continuation lines between a flag and the one before."""
-    groups: list[str] = []
-    for word in map(shlex.quote, words):
-        if groups and not word.startswith("-"):
-            groups[-1] += f" {word}"
-        else:
-            groups.append(word)
-    lines = [groups[0]]
-    for group in groups[1:]:
-        if len(lines[-1]) + len(group) + 3 > WIDTH:
-            lines.append("   ")
-        lines[-1] += f" {group}"
-    return " \\\n".join(lines)
-
-
-def _wrap(text: str, indent: str = "") -> str:
-    return textwrap.fill(text, WIDTH, subsequent_indent=indent, break_long_words=False, break_on_hyphens=False)
-
-
-def _shown(path: str) -> str:
-    """A folder the run recorded (absolute), relative to the working directory where it lies below it."""
-    p, here = Path(path), Path.cwd()
-    return p.relative_to(here).as_posix() if p.is_absolute() and p.is_relative_to(here) else p.as_posix()
-
-
-def _q(path: str | Path) -> str:
-    return shlex.quote(Path(path).as_posix())
-
-
-def _count(n: int, word: str) -> str:
-    return f"{'one' if n == 1 else n} {word}{'' if n == 1 else 's'}"
