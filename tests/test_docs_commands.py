@@ -1,13 +1,15 @@
 """Every command on the Quick start and in the guides runs, and shows what the page says it shows.
 
 Each page's shell blocks are read as a user would copy them; every ``rbc`` and ``drive_server`` line runs, in
-order, in one working folder that links the repository's ``models/`` and ``tests/``, on small data where the
-real thing is large: the 36-row test recording stands in for your laps and for the public recordings (a local
+order, in one working folder that links the repository's ``models/`` and ``tests/`` (as a clone has them), on
+small data where the real thing is large: the 36-row test recording stands in for the public recordings (a local
 git repository serves ``rbc data fetch``), a short stadium track for the built-in ones, one short generated
 world for two hundred, five rows a simulated second instead of fifteen, one epoch of one step for a training
 run, one experiment and one seed for the paper's suite, and ``drive_server`` listens on a free port and is
-driven by ``rbc replay``. ``rbc demo`` drives its whole lap, and its lap must be the one the Quick start shows.
-A command a page gains without a way to run here fails :func:`test_every_guide_command_is_run_here`.
+driven by ``rbc replay``. What is short already runs as written (:data:`AS_WRITTEN`): ``rbc demo`` drives its
+whole lap, which must be the one the Quick start shows, and "Record and train on your laps" records and trains
+on its own lap, whose output must be the page's. A command a page gains without a way to run here fails
+:func:`test_every_guide_command_is_run_here`.
 """
 
 from __future__ import annotations
@@ -37,7 +39,13 @@ NOT_RUN = {
     "rbc eval --behavior simplistic --backend ray --address HEAD_IP:6379 --out eval/simplistic":
         "needs a Ray cluster; tests/test_evaluate_ray.py runs the Ray backend on a private instance",
 }
+#: Commands short enough to run as the page has them: what they print is compared with the page.
+AS_WRITTEN = {
+    "rbc collect --track lake --laps 1 --rate-hz 5 --out my_laps",
+    "rbc train --recipe laps --data my_laps --out runs/mine",
+}
 FENCE = re.compile(r"^```(\w*)\s*$")
+NUMBER = re.compile(r"\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")
 #: The stand-ins for the public recordings: one per fold, lake where the closed loop is driven.
 PUBLIC = (("0xR4Y", "lake", "A"), ("AhmedonGit", "jungle", "B"), ("AVMktl-2", "mountain", "C"),
           ("WyckliffeAluga", "lake", "D"))
@@ -67,6 +75,12 @@ def page_commands(name: str) -> list[str]:
     return found
 
 
+def shape(line: str) -> str:
+    """A printed line with its numbers masked: what differs from machine to machine (times, ports, the last
+    digits of a training's losses) and what the line says."""
+    return NUMBER.sub("#", line)
+
+
 def output_block(name: str, first_line: str) -> list[str]:
     """The lines of the page's ``text`` block that starts with ``first_line``."""
     blocks = re.findall(r"```text\n(.*?)```", (DOCS / name).read_text(encoding="utf-8"), re.S)
@@ -81,9 +95,9 @@ def _git(*args: str, cwd: Path) -> str:
 
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory):
-    """A user's folder: ``models/`` and ``tests/`` of the checkout, two recordings of their own laps, a short
-    track, a Keras 1 PilotNet as the peer's ``model.h5``, and the list of public recordings pointing at a local
-    repository of four copies of the sample."""
+    """A user's folder: ``models/`` and ``tests/`` of the checkout, a short track, a Keras 1 PilotNet as the
+    peer's ``model.h5``, and the list of public recordings pointing at a local repository of four copies of the
+    sample. Laps of their own the pages record themselves."""
     if shutil.which("git") is None:
         pytest.skip("git is not installed (rbc data fetch)")
     pytest.importorskip("torch")
@@ -93,8 +107,6 @@ def workspace(tmp_path_factory):
     ws = tmp_path_factory.mktemp("user")
     for link in ("models", "tests"):
         (ws / link).symlink_to(REPO / link)
-    for name in ("my_laps", "other_laps"):
-        shutil.copytree(UDACITY_SAMPLE, ws / name, ignore=shutil.ignore_patterns("README.md"))
     track = write_stadium(ws, straight=40.0, radius=25.0)
     cones_track = write_stadium(ws, straight=200.0, radius=50.0)  # 710 m: room for the collision behavior's 20 cones
     pytest.importorskip("h5py")
@@ -214,8 +226,9 @@ def serve(argv: list[str], ws: dict, capsys) -> str:
     return log_path.read_text()
 
 
-def demo(argv: list[str], ws: dict, out: str) -> str:
-    done = subprocess.run([sys.executable, "-m", "tools.cli", *argv, "--out", out], cwd=ws["dir"],
+def demo(argv: list[str], ws: dict) -> str:
+    """``rbc demo ARGS`` as a user runs it, its whole lap: what it printed."""
+    done = subprocess.run([sys.executable, "-m", "tools.cli", *argv], cwd=ws["dir"],
                           capture_output=True, text=True, timeout=300, env={**os.environ, "COLUMNS": "120"})
     assert done.returncode == 0, done.stderr[-2000:]
     return done.stdout
@@ -275,12 +288,13 @@ def run_page(name: str, ws: dict, capsys) -> dict[str, str]:
             if "--watch" in argv:
                 watch(argv, ws)
             elif len(argv) == 1:
-                printed[command] = demo(argv, ws, "demo_out")
+                printed[command] = demo(argv, ws)
             else:  # another model on another track: the same command, its lap cut short
-                code, out = short_demo([*argv, "--out", f"demo_{len(printed)}"], capsys)
+                code, out = short_demo(argv, capsys)
                 assert code == 0 and "degree of autonomy" in out, out
+                printed[command] = out
             continue
-        code, out = rbc(small(argv, ws), capsys)
+        code, out = rbc(argv if command in AS_WRITTEN else small(argv, ws), capsys)
         assert code == 0, f"{name}: {command} exited {code}\n{out[-2000:]}"
         if redirect:
             (ws["dir"] / redirect).write_text(out, encoding="utf-8")
@@ -297,6 +311,7 @@ def test_every_guide_command_is_run_here():
     commands = {c for page in GUIDES for c in page_commands(page)}
     assert len(commands) > 40
     assert set(NOT_RUN) <= commands, "a command excused here is no longer on a page"
+    assert commands >= AS_WRITTEN, "a command run as written is no longer on a page"
     for command in commands - set(NOT_RUN):
         argv = shlex.split(re.sub(r"\$\([^)]*\)\)?", "", command.split(" > ")[0]))
         assert argv[0] in ("rbc", "drive_server"), command
@@ -304,25 +319,69 @@ def test_every_guide_command_is_run_here():
 
 def test_quick_start(workspace, capsys):
     printed = run_page("quickstart.md", workspace, capsys)
+    ws = workspace["dir"]
     shown = output_block("quickstart.md", "drive_server generalist_pilotnet.onnx listening on")
     got = printed["rbc demo"].splitlines()
     lap = next(line for line in shown if line.lstrip().startswith("1 "))
     assert lap in got  # the lap is deterministic: the page's row is the row a fresh run prints
+    assert [shape(line) for line in got] == [shape(line) for line in shown]  # and every other line, but figures
     assert got[-1] == shown[-1] == "degree of autonomy: 100.0 %"
-    assert [line.split()[0] for line in got if line[:4] in ("map ", "stri", "json")] == ["map", "strip", "json"]
+    assert {"map.png", "strip.jpg", "result.json"} <= {p.name for p in (ws / "demo_out").iterdir()}
+    # Try a few things: each demo variant writes a folder of its own, and the demo's own stays as it was
+    first = (ws / "demo_out" / "result.json").read_bytes()
+    for behavior in ("simplistic", "rigorous"):
+        out = printed[f"rbc demo --behavior {behavior}"]
+        assert f"json  demo_out_{behavior}/result.json" in out.splitlines() and "replaced" not in out
+    assert (ws / "demo_out" / "result.json").read_bytes() == first
+    again = short_demo(["demo", "--behavior", "rigorous"], capsys)[1]  # a rerun says what it replaced
+    assert "(replaced an earlier run's files in demo_out_rigorous/; --out DIR keeps them apart)" in again
+
+
+def test_quick_start_shows_what_each_variant_ends_with():
+    """The variants' laps, as the page's table gives them, are the laps of the results' records (the test above
+    cuts them short; the laps are deterministic: the default demo's is checked whole)."""
+    rows = {cells[0]: cells for line in (DOCS / "quickstart.md").read_text(encoding="utf-8").splitlines()
+            if line.startswith("| `rbc ") for cells in [[c.strip() for c in line.strip("|").split("|")]]}
+    laps = {(run["model"], run["track"]): run["output"]["laps"][0]
+            for run in json.loads((REPO / "results" / "headless-laps.json").read_text())["runs"]}
+    for behavior, track in (("simplistic", "lake"), ("rigorous", "mountain")):
+        command, lap, eta, pictures = rows[f"`rbc demo --behavior {behavior}`"]
+        record = laps[(f"{behavior}.onnx", track)]
+        figures = [float(x) for x in re.findall(r"(\d+\.\d+) (?:s|km/h|m)\b", lap)]
+        assert lap.startswith(track) and figures == pytest.approx(
+            [record["lap_time_s"], record["mean_speed_kmh"], record["cte_rms_m"]], abs=0.051), lap
+        assert eta == f"{record['eta']:.1f} %" and pictures == f"`demo_out_{behavior}/`"
+    worlds = {run["model"]: run["output"] for run in
+              json.loads((REPO / "results" / "unseen-worlds.json").read_text())["runs"]}
+    lap, eta = rows["`rbc sim --model ... world:1000009`"][1:3]
+    assert worlds["generalist.onnx"]["worst"] == f"{eta} (world 1000009)" and "one take-over" in lap
+    assert rows["`rbc demo --watch`"][2] == "100.0 %"
 
 
 def test_record_and_train_on_your_laps(workspace, capsys):
+    """The page records its own lap, trains on it as written and shows what that printed and wrote."""
     printed = run_page("recordings.md", workspace, capsys)
-    shown = output_block("recordings.md", "recording         rows")
-    got = printed["rbc data stats my_laps"].splitlines()
-    assert [line.split()[1:] for line in (got[2], got[-1])] == [line.split()[1:] for line in (shown[2], shown[-1])]
+    ws = workspace["dir"]
+    shown = output_block("recordings.md", "recording  rows")
+    assert printed["rbc data stats my_laps"].splitlines() == shown  # the autopilot's lap is deterministic
     trained = printed["rbc train --recipe laps --data my_laps --out runs/mine"].splitlines()
-    assert trained[0].startswith("rows: 36 read, 0 skipped") and "kept:" in trained[0]
-    assert any(line.startswith("exported epoch 1 (last); held-out frames (blocks split): MSE ") for line in trained)
-    assert (workspace["dir"] / "runs" / "mine" / "model.onnx").is_file()
-    assert "[data]" in (workspace["dir"] / "my_recipe.toml").read_text()
-    assert (workspace["dir"] / "runs" / "mine2" / "model.onnx").is_file()
+    shown = output_block("recordings.md", "read: ")
+    assert trained[:4] == shown[:4]  # what it read, used and held out, and the network: the same everywhere
+    assert [shape(line) for line in trained] == [shape(line) for line in shown]  # the losses' last digits vary
+    assert sorted(p.name for p in (ws / "runs" / "mine").iterdir()) == [
+        "checkpoint.pt", "config.json", "drive1", "history.csv", "inspect", "loss.png", "model.onnx"]
+    inspected = printed["rbc inspect runs/mine"].splitlines()
+    shown = output_block("recordings.md", "runs/mine/inspect/")
+    assert inspected[:4] == shown[:4] and [shape(line) for line in inspected] == [shape(line) for line in shown]
+    assert all((ws / path).is_file() for path in shown[:4])
+    scored = printed["rbc score --data tests/data/udacity-sample --model runs/mine/model.onnx"]
+    assert "0.0112" in scored  # always-0 on the sample, as the page says
+    driven = printed["rbc drive-log --data my_laps --model runs/mine/model.onnx --held-out-of runs/mine"]
+    assert "degree of autonomy 100.0 %  interventions 0" in driven
+    simulated = printed["rbc sim --model runs/mine/model.onnx --track lake"].splitlines()
+    assert simulated[0] == "track lake (1003 m), driver onnx:model.onnx, speed limit 25 km/h"
+    assert "[data]" in (ws / "my_recipe.toml").read_text()
+    assert (ws / "runs" / "mine2" / "model.onnx").is_file()
 
 
 def test_drive_the_udacity_simulator(workspace, capsys):

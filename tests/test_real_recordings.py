@@ -108,8 +108,8 @@ def test_train_prints_the_row_summary(tmp_path: Path, capsys) -> None:
                "--max-steps-per-epoch", "1", "--threads", "1", "--no-progress"])
     assert rc == 0
     out = capsys.readouterr().out
-    assert "rows: 36 read, 0 skipped (bad rows or missing images), 0 with unreadable frames, " in out
-    assert "dropped below 30.19 mph" in out and "blocks split" in out
+    assert "read: 36 rows of 1 recording; 0 bad rows or missing images, 0 unreadable frames\n" in out
+    assert "below 30.19 mph" in out and "held out in blocks of 50" in out
     assert "Pearson r" in out and "always-0 MSE" in out
 
 

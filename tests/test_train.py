@@ -51,7 +51,8 @@ def run(tmp_path_factory: pytest.TempPathFactory):
 
 def test_run_directory_contents(run) -> None:
     d = run.run_dir
-    assert sorted(p.name for p in d.iterdir()) == ["checkpoint.pt", "config.json", "history.csv", "model.onnx"]
+    assert sorted(p.name for p in d.iterdir()) == ["checkpoint.pt", "config.json", "history.csv", "loss.png",
+                                                   "model.onnx"]
     record = json.loads((d / "config.json").read_text())
     assert record["config"]["seed"] == 11 and record["config"]["batch_size"] == 256
     assert record["config"]["learning_rate"] == 1e-3 and record["config"]["aug_loops"] == 64
@@ -205,3 +206,30 @@ def test_row_stride_trains_as_a_log_of_every_nth_row(tmp_path: Path) -> None:
     assert all(torch.equal(a[k], b[k]) for k in a)
     with pytest.raises(ValueError, match="row stride"):
         _config(tmp_path / "bad", row_stride=0)
+
+
+def test_rbc_train_piped_prints_each_line_once_in_plain_words(tmp_path: Path) -> None:
+    """Issue 55: piped (``2>&1 | tail``), ``rbc train`` drew tqdm bars, printed every summary line twice (once more
+    as ``INFO models.training.train:``, and the epochs only after the last one), in internal names
+    (``simplistic/shallow-wide/ours: 117 training, 50 validation samples``), and wrote no loss.png though the
+    guides said it did."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, "-m", "tools.cli", "train", "--recipe", "laps", "--data", str(SAMPLE),
+                           "--out", str(out), "--epochs", "2", "--max-steps-per-epoch", "1", "--threads", "1"],
+                          capture_output=True, text=True, timeout=300, cwd=Path(__file__).parents[1])
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stderr == ""  # no bars off a terminal, no log lines repeating what is printed
+    lines = done.stdout.splitlines()
+    assert len(lines) == len(set(lines)), done.stdout
+    assert lines[:4] == ["read: 36 rows of 1 recording; 0 bad rows or missing images, 0 unreadable frames",
+                         "used: every 2nd row, leaving out 0 below 5 mph: 18 frames",
+                         "split: 15 frames for training, 3 held out in blocks of 50",
+                         "network: the wider shallow CNN (46,065 weights); 2 epochs of 1 step of 256 samples"]
+    assert [line.split(":")[0] for line in lines[4:]] == ["epoch 1/2", "epoch 2/2", "held-out frames", "model",
+                                                          "loss curve", "time"]
+    assert f"loss curve: {out / 'loss.png'}" in lines
+    assert (out / "loss.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(out.glob(".*.tmp"))

@@ -158,7 +158,8 @@ def test_inspect_scores_validation_frames_only_and_says_so(tmp_path: Path, capsy
     assert 0 < len(val) < len(window)  # the plotted window holds training frames too: they must not count
     x = to_input_tensor(data.cache.frames[0, val], stored.pipeline().contract)
     expected = steering_metrics(_onnx_outputs(result.onnx, x).ravel(), data.steering[val])
-    line = next(ln for ln in out.splitlines() if ln.startswith("plotted window"))
-    assert "validation frames only (blocks split)" in line and f"({len(val)} frames)" in line
+    line = next(ln for ln in out.splitlines() if ln.startswith("held-out frames in the plotted window: "))
+    assert f"({len(val)} frames)" in line
     assert f"MSE {expected['mse']:.4f}" in line
-    assert "all validation frames, as rbc train reported them" in out
+    assert "all held-out frames: " in out
+    assert str(result.run_dir / "inspect" / "predictions.png") in out.splitlines()  # into RUN/inspect/

@@ -19,6 +19,7 @@ CONFIG = "config.json"
 HISTORY = "history.csv"
 CHECKPOINT = "checkpoint.pt"
 MODEL = "model.onnx"
+LOSS_PLOT = "loss.png"  # the loss per epoch (rbc train in the run folder, rbc inspect in RUN/inspect/)
 HISTORY_FIELDS = ("epoch", "train_loss", "val_loss", "seconds")
 
 
@@ -62,6 +63,10 @@ class RunPaths:
     @property
     def model(self) -> Path:
         return self.run_dir / MODEL
+
+    @property
+    def loss_plot(self) -> Path:
+        return self.run_dir / LOSS_PLOT
 
 
 @dataclass(frozen=True)

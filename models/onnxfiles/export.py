@@ -63,7 +63,7 @@ def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, An
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))
         diff = verify_onnx(tmp, model, contract, frames)
-    log.info("exported %s (max |onnxruntime - torch| = %.2e on %d frames)", path, diff, len(frames))
+    log.debug("exported %s (max |onnxruntime - torch| = %.2e on %d frames)", path, diff, len(frames))
     return diff
 
 

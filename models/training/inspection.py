@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from models.networks.runfiles import EpochRow
+from models.networks.runfiles import EpochRow, RunPaths
+from protocol.runrecords import write_bytes
 
 LAP_FRAMES = 1200  # about one lap of the lake track at the simulator's recording rate
 
@@ -50,12 +51,15 @@ def plot_histograms(out: Path, data, pipeline, seed: int) -> Path:
 
 
 def plot_loss(out: Path, history: Sequence[EpochRow], exported_epoch: int | None = None) -> Path:
-    import matplotlib.pyplot as plt
+    """``loss.png`` in ``out``. Drawn on a bare Figure (no pyplot): it never changes the caller's backend, so a
+    notebook that trains keeps its own plots."""
+    from matplotlib.figure import Figure
 
     epochs = [h.epoch for h in history]
-    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    fig = Figure(figsize=(5.5, 3.5))
+    ax = fig.add_subplot()
     ax.plot(epochs, [h.train_loss for h in history], "o-", label="training (augmented)")
-    ax.plot(epochs, [h.val_loss for h in history], "s-", label="validation")
+    ax.plot(epochs, [h.val_loss for h in history], "s-", label="validation (held-out frames)")
     if exported_epoch:
         ax.axvline(exported_epoch, color="0.4", ls=":", label=f"exported (epoch {exported_epoch})")
     ax.set_yscale("log")
@@ -65,9 +69,8 @@ def plot_loss(out: Path, history: Sequence[EpochRow], exported_epoch: int | None
     ax.legend()
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    path = out / "loss.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    path = RunPaths(out).loss_plot
+    write_bytes(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))  # a viewer never opens half a picture
     return path
 
 

@@ -1,8 +1,13 @@
 """Training: balance, augment, fit (Adam 1e-3, MSE, batch 256), validate, checkpoint, export to ONNX.
 
 A run directory holds ``config.json`` (everything needed to reproduce the run), ``history.csv``,
-``checkpoint.pt`` and finally ``model.onnx``. Ctrl-C finishes the current step, saves a checkpoint
-and returns; ``resume=True`` continues from it with the stored configuration, batch for batch.
+``loss.png`` (the loss per epoch, redrawn after each one), ``checkpoint.pt`` and finally ``model.onnx``.
+Ctrl-C finishes the current step, saves a checkpoint and returns; ``resume=True`` continues from it with the
+stored configuration, batch for batch.
+
+What a run has to say (what data it kept, the network, one line per epoch) goes to ``report``, one line at a
+time as it happens: ``rbc train`` prints it; without ``report`` it is logged at INFO. Progress bars are drawn
+only on a terminal (tqdm's ``disable=None``), and not at all with ``progress=False``.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from torch import nn
 from models.augmentation.fastaug import FastAugmenter
 from models.data.batches import Prefetcher, TrainingSet, epoch_batches
 from models.data.behavior import Pipeline
+from models.data.split import SplitKind
 from models.data.trainingdata import PreparedData, prepare_data
 from models.networks import runfiles
 from models.networks.checkpoint import RunDirError, State, load_checkpoint, save_checkpoint
@@ -39,6 +45,11 @@ from models.training.train_record import config_record
 log = logging.getLogger(__name__)
 
 CHECKPOINT_EVERY_S = 120.0
+#: The networks as the field calls them (``arch`` in a recipe).
+NETWORK_NAMES = {"shallow": "the paper's shallow CNN", "shallow-wide": "the wider shallow CNN",
+                 "pilotnet": "NVIDIA's PilotNet"}
+
+Report = Callable[[str], None]
 
 
 __all__ = ["RunDirError", "TrainConfig", "TrainResult", "train"]
@@ -61,17 +72,76 @@ def default_threads(arch: str = "shallow") -> int:
     return cores if arch == "pilotnet" else max(1, cores - 1)
 
 
-def train(config: TrainConfig, resume: bool = False) -> TrainResult:
-    """Train one run: one process, or (under torchrun) rank ``RANK`` of ``WORLD_SIZE`` with DDP."""
+def train(config: TrainConfig, resume: bool = False, report: Report | None = None) -> TrainResult:
+    """Train one run: one process, or (under torchrun) rank ``RANK`` of ``WORLD_SIZE`` with DDP. ``report``
+    gets the run's lines as they happen (rank 0's only); without it they are logged at INFO."""
     world = ddp.world_from_env()
     ddp.init_world(world)
     try:
-        return _train(config, resume, world)
+        say = (report or _log_info) if world.is_main else log.debug
+        return _train(config, resume, world, say)
     finally:
         ddp.close_world(world)
 
 
-def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
+def _log_info(line: str) -> None:
+    log.info("%s", line)
+
+
+def describe_data(data: PreparedData, config: TrainConfig) -> list[str]:
+    """What a run read, kept and held out, in three lines of the field's words."""
+    c = data.counts
+    lines = [f"read: {c['rows']} rows of {_count(c['recordings'], 'recording')}; "
+             f"{c['skipped']} bad rows or missing images, {c['unreadable']} unreadable frames"]
+    stride = "every row" if c.get("stride", 1) == 1 else f"every {_ordinal(c['stride'])} row"
+    slow = (f", leaving out {c['slow']} below {config.min_speed:g} {config.min_speed_unit}"
+            if config.min_speed > 0 else "")
+    lines.append(f"used: {stride}{slow}: {c['kept']} frames")
+    kind = SplitKind(data.split.kind)
+    if kind is SplitKind.RECORDINGS:
+        how = f"{c['val_recordings']} of {c['recordings']} recordings held out whole"
+    elif kind is SplitKind.BLOCKS:
+        how = f"held out in blocks of {data.split.block_frames}"
+        if c.get("gap"):
+            how += f" ({c['gap']} next to them left out)"
+    else:
+        how = "held out at random"
+    lines.append(f"split: {c['train']} frames for training, {c['val']} {how}")
+    return lines
+
+
+def _ordinal(n: int) -> str:
+    return f"{n}{'th' if 10 <= n % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(n % 10, 'th')}"
+
+
+def describe_network(config: TrainConfig, parameters: int, epochs: int, steps: int) -> str:
+    """The network and the training schedule, in one line."""
+    what = NETWORK_NAMES.get(config.arch, config.arch)
+    if config.behavior != "simplistic":
+        what += f", the {config.behavior} behavior"
+    if config.approach != "ours":
+        what += f", {config.approach}'s approach"
+    return (f"network: {what} ({parameters:,} weights); {_count(epochs, 'epoch')} of {_count(steps, 'step')} of "
+            f"{config.batch_size} samples")
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def draw_loss(run_dir: Path, history: list[dict[str, float]], exported_epoch: int | None = None) -> Path | None:
+    """``loss.png`` in the run folder: the training and held-out MSE per epoch (None without matplotlib)."""
+    try:
+        from models.training.inspection import plot_loss
+
+        rows = [runfiles.EpochRow(int(h["epoch"]), h["train_loss"], h["val_loss"], h["seconds"]) for h in history]
+        return plot_loss(run_dir, rows, exported_epoch)
+    except ImportError as exc:  # the train extra brings matplotlib; a bare torch install may lack it
+        log.warning("loss curve not drawn: %s (pip install -e \".[train]\")", exc)
+        return None
+
+
+def _train(config: TrainConfig, resume: bool, world: ddp.World, say: Report) -> TrainResult:
     run_dir = Path(config.out)
     config = _resolve_config(config, run_dir, resume, world)
     pipeline = config.pipeline()
@@ -86,7 +156,7 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
     checkpoint = runfiles.RunPaths(run_dir).checkpoint
     if resume and checkpoint.exists():  # before decoding any frame: a bad checkpoint is reported at once
         state, best = load_checkpoint(checkpoint, model, optimizer)
-        log.info("resuming %s at epoch %d step %d", run_dir, state.epoch + 1, state.step)
+        say(f"resuming {run_dir} at epoch {state.epoch + 1}, step {state.step}")
     data = _prepare(config, pipeline)
     n_train, n_val = len(data.train), len(data.val)
     steps = steps_per_epoch(n_train, config.batch_size, config.aug_loops)
@@ -96,15 +166,14 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
         record = config_record(config, pipeline, data, epochs, steps, validation_steps(n_val, config.batch_size))
         runfiles.write_config(run_dir, record | {"world_size": world.size})
 
-    log.info("%s", data.summary(config.data_options()))
+    for line in describe_data(data, config):
+        say(line)
     augmenter = FastAugmenter(data.cache, pipeline.augment)
     tset = TrainingSet(data.train, data.targets[data.train], data.has_sides[data.train], pipeline.deletion_rate,
                        config.batch_size, data.recording_groups(data.train) if config.balance_recordings else None,
                        None if data.middles is None else data.middles[data.train])
     tset = ddp.shard(tset, world)  # this rank's samples and share of the batch (all of both in one process)
-    log.info("%s/%s/%s: %d training, %d validation samples; %d epochs x %d steps of %d (%d params)",
-             config.behavior, config.arch, config.approach, n_train, n_val, epochs, steps, config.batch_size,
-             count_parameters(model))
+    say(describe_network(config, count_parameters(model), epochs, steps))
     trained = 0
     wall = time.perf_counter()
     with _StopFlag() as stop:
@@ -120,8 +189,8 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
             val_loss = evaluate(model, data, pipeline, config.batch_size)
             state.history.append({"epoch": state.epoch + 1, "train_loss": state.loss_sum / max(1, state.loss_count),
                                   "val_loss": val_loss, "seconds": round(state.epoch_seconds, 2)})
-            log.info("epoch %d/%d: train MSE %.5f, val MSE %.5f, %.0f s", state.epoch + 1, epochs,
-                     state.history[-1]["train_loss"], val_loss, state.epoch_seconds)
+            say(f"epoch {state.epoch + 1}/{epochs}: train MSE {state.history[-1]['train_loss']:.5f}  "
+                f"val MSE {val_loss:.5f}  {state.epoch_seconds:.0f} s")
             if val_loss < state.best_val:  # strictly lower: ties keep the earlier epoch
                 best = copy.deepcopy(model.state_dict())
                 state.best_epoch, state.best_val = state.epoch + 1, val_loss
@@ -129,6 +198,7 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
             if world.is_main:
                 runfiles.write_history(run_dir, state.history)
                 save_checkpoint(checkpoint, model, optimizer, state, config, best)
+                draw_loss(run_dir, state.history)
             if stop.requested and state.epoch < epochs:
                 log.warning("interrupted after epoch %d: checkpoint saved; continue with --resume", state.epoch)
                 return TrainResult(run_dir, state.history, None, None, None, interrupted=True)
@@ -136,7 +206,9 @@ def _train(config: TrainConfig, resume: bool, world: ddp.World) -> TrainResult:
     if not world.is_main:  # rank 0 exports; the others trained the same weights
         return TrainResult(run_dir, state.history, None, state.best_val, None, samples_per_s=rate,
                            info={"rank": world.rank})
-    return finish(model, data, pipeline, config, state, run_dir, rate, best)
+    result = finish(model, data, pipeline, config, state, run_dir, rate, best)
+    result.info["loss_plot"] = draw_loss(run_dir, state.history, result.info.get("exported_epoch"))
+    return result
 
 
 def evaluate(model: nn.Module, data: PreparedData, pipeline: Pipeline, batch_size: int) -> float:
@@ -159,7 +231,7 @@ def _train_epoch(model: nn.Module, optimizer: torch.optim.Optimizer, augmenter: 
                                       steps))
     net = ddp.wrap(model, world)
     bar = tqdm(total=steps, initial=state.step, desc=f"epoch {state.epoch + 1}", unit="step", leave=False,
-               disable=not config.progress, dynamic_ncols=True)
+               disable=None if config.progress else True, dynamic_ncols=True)  # None: bars on a terminal only
     started = time.perf_counter() - state.epoch_seconds
     last_save = time.perf_counter()
     done = 0
@@ -193,7 +265,8 @@ def _prepare(config: TrainConfig, pipeline: Pipeline) -> PreparedData:
     from tqdm import tqdm
 
     workers = config.decode_workers or max(1, os.cpu_count() or 1)
-    with tqdm(desc="decoding frames", unit="sample", disable=not config.progress, leave=False, delay=0.5) as bar:
+    with tqdm(desc="decoding frames", unit="sample", disable=None if config.progress else True, leave=False,
+              delay=0.5) as bar:
 
         def progress(done: int, total: int) -> None:
             bar.total = total

@@ -2,7 +2,9 @@
 
 Starts ``drive_server`` with a bundled model as a separate process, drives one lap of the headless
 simulator against it over the Unity wire protocol, prints the degree of autonomy, lap time and
-latency, and writes a trajectory map and an image strip of the lap.
+latency, and writes a trajectory map and an image strip of the lap: into ``demo_out/``, or for another model
+a folder of its own (``demo_out_simplistic/``, ``demo_out_NAME/`` for ``--model NAME.onnx``), so that trying a
+variant never overwrites the default demo's pictures; a rerun says when it replaced an earlier run's files.
 """
 
 from __future__ import annotations
@@ -30,10 +32,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="drive_server --speed-limit in km/h (default %(default)s)")
     add_vehicle_argument(p, ScenarioConfig.vehicle)
     add_monitor_argument(p, "the demo's server")
-    p.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the map, strip and JSON")
+    p.add_argument("--out", type=Path, default=None,
+                   help="folder for the map, strip and JSON (default: demo_out; demo_out_BEHAVIOR with --behavior, "
+                        "demo_out_NAME with --model NAME.onnx)")
     p.add_argument("--watch", action="store_true",
                    help="drive at the pace of the wall clock and print the live view's address, so the lap can "
                         "be watched in a browser (a 1 km lap takes about 3 minutes)")
+
+
+def _default_out(behavior: str | None, model: Path | None) -> Path:
+    """Where a demo writes without ``--out``: ``demo_out`` for the default model, else a folder of the model's own."""
+    if model is not None:
+        return Path(f"demo_out_{model.stem}")
+    return Path(f"demo_out_{behavior}" if behavior else "demo_out")
 
 
 def _server_latency(stats_path: Path) -> str:
@@ -63,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
     model = args.model or (bundled_model_path(args.behavior) if args.behavior else demo_model_path())
     if not model.is_file():
         raise CommandError(f"model not found: {model}", "pass --model PATH to an .onnx file")
-    out: Path = args.out
+    out: Path = args.out or _default_out(args.behavior, args.model)
+    replacing = (out / "result.json").is_file()
     out.mkdir(parents=True, exist_ok=True)
     stats_path = out / "server_stats.json"
     setup = SETUPS[args.behavior or "simplistic"]  # a specialist's training scene; the generalist's: lake
@@ -76,10 +88,11 @@ def run(args: argparse.Namespace) -> int:
         url = server.start()
     except ServerStartError as exc:
         raise CommandError(str(exc)) from exc
-    print(f"drive_server {model.name} listening on {url}; driving {args.laps} lap(s) of {config.track} "
-          f"({config.vehicle} car)", flush=True)
+    print(f"drive_server {model.name} listening on {url}", flush=True)
+    print(f"driving {args.laps} lap{'' if args.laps == 1 else 's'} of {config.track} ({config.vehicle} car)",
+          flush=True)
     if args.watch:
-        print(f"watch it live at {url}/ (open it in a browser; the lap runs at the wall clock's pace)", flush=True)
+        print(f"watch it live at {url}/ in a browser (the lap runs at the wall clock's pace)", flush=True)
     progress = Progress(f"demo {config.track}")
     try:
         with SocketDriver(url) as driver:
@@ -99,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
     if strip.frames:
         print(f"strip {strip.write(out / 'strip.jpg')}")
     print(f"json  {out / 'result.json'}")
+    if replacing:
+        print(f"(replaced an earlier run's files in {out}/; --out DIR keeps them apart)")
     finished = [lap for lap in result.laps if lap.completed]
     if finished:
         print(f"\ndegree of autonomy: {', '.join(f'{lap.eta:.1f} %' for lap in finished)}"

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     written.append(plot_activations(out, data, pipeline, model, args.samples, config.seed))
     for p in written:
         print(p)
-    print(f"plotted window, its validation frames only ({config.split} split): {format_metrics(window)}")
+    print(f"held-out frames in the plotted window: {format_metrics(window)}")
     if record.result is not None:
-        print(f"all validation frames, as rbc train reported them: {format_metrics(record.result['val_metrics'])}")
+        print(f"all held-out frames: {format_metrics(record.result['val_metrics'])}")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import time
 
 from tools.arguments import add_moved_to_recipe_flags
 from tools.errors import CommandError
@@ -58,28 +59,27 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("no training data", "give at least one --data DIR (a folder rbc collect wrote)")
     config = load_recipe(args.recipe, **overrides, data=args.data, out=args.out, val_data=args.val_data,
                          threads=args.threads, progress=not args.no_progress)
-    result = train(config, resume=args.resume)
+    started = time.perf_counter()
+    result = train(config, resume=args.resume, report=lambda line: print(line, flush=True))
     if result.info.get("rank") and not result.interrupted:  # torchrun: rank 0 reports (and exported)
         return 0
-    if "summary" in result.info:
-        print(result.info["summary"])
-    for row in result.history:
-        print(f"epoch {row['epoch']}: train MSE {row['train_loss']:.5f}  val MSE {row['val_loss']:.5f}  "
-              f"{row['seconds']:.0f} s")
     if result.interrupted:
         print(f"interrupted; checkpoint in {result.run_dir}; continue with: rbc train --out {result.run_dir} --resume")
         return 130
     info = result.info
-    print(f"exported epoch {info['exported_epoch']} ({info['export']}); held-out frames ({info['split']} split): "
-          f"{format_metrics(info['metrics'])}")
+    print(f"held-out frames: {format_metrics(info['metrics'])}")
     by_recording = info.get("val_by_recording", [])
     if len(by_recording) > 1:
         beats = sum(m["beats_zero"] for m in by_recording)
         print(f"per held-out recording ({beats} of {len(by_recording)} beat always-0):")
         for m in by_recording:
             print(f"  {_recording_name(m['log']):<40} {format_metrics(m)}{'' if m['beats_zero'] else '  (not)'}")
-    print(f"model: {result.onnx} (val MSE {result.val_loss:.5f}; ONNX Runtime matches PyTorch to "
-          f"{result.export_diff:.1e}); {result.samples_per_s:.0f} training samples/s")
+    which = "the last" if info["export"] == "last" else "the lowest val MSE"
+    print(f"model: {result.onnx} (epoch {info['exported_epoch']}, {which}; ONNX Runtime matches PyTorch to "
+          f"{result.export_diff:.1e})")
+    if info.get("loss_plot"):
+        print(f"loss curve: {info['loss_plot']}")
+    print(f"time: {time.perf_counter() - started:.0f} s, {result.samples_per_s:.0f} training samples/s")
     return 0
 
 

@@ -25,6 +25,6 @@ def print_summary(result, speed_limit_note: str) -> None:
             print(f"    lap {lap.lap}: {i.cause:<9} at s={i.s:7.1f} m  (x={i.x:7.1f}, y={i.y:7.1f})  t={i.t:7.1f} s")
     mode = "real time" if cfg.realtime else f"lock-step {cfg.control_hz:g} Hz"
     print(f"wall {result.wall_time_s:.2f} s for {result.sim_time_s:.1f} s simulated ({mode}), "
-          f"{result.frames} frames ({result.frames / max(result.wall_time_s, 1e-9):.0f}/s), "
-          f"latency p50 {result.latency_ms_p50:.2f} ms p99 {result.latency_ms_p99:.2f} ms"
+          f"{result.frames} frames ({result.frames / max(result.wall_time_s, 1e-9):.0f}/s)"
           + ("  [interrupted]" if result.interrupted else ""))
+    print(f"latency p50 {result.latency_ms_p50:.2f} ms p99 {result.latency_ms_p99:.2f} ms (round trip)")
