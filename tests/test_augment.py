@@ -11,12 +11,14 @@ import pytest
 
 from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT
 from drive_server.preprocess import frame_to_network_image
-from models.augmentation import augment, geometry
-from models.augmentation.augment import CAMERAS, CENTER, LEFT, RIGHT, AugmentSpec, augment_reference, draw_params
+from models.augmentation import augment, geometry, reference
+from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, draw_params
 from models.augmentation.fastaug import FastAugmenter, augment_batch
+from models.augmentation.reference import augment_reference
 from models.data.behavior import BEHAVIOR_SPECS, NVIDIA_AUGMENT, Behavior
 from models.data.framecache import FrameCache, build_cache, load_frame
 from protocol.datalog import read_log
+from protocol.facts import CAMERAS
 
 SAMPLE = Path(__file__).parent / "data" / "udacity-sample"
 NONE = dict(perspective=0.0, shadow=0.0, brightness=0.0, flip=0.0, pan=0.0, tilt=0.0)
@@ -53,7 +55,7 @@ def test_perspective_label_of_straight_driving_and_clamp() -> None:
 
 def test_flip_negates_label_and_mirrors_eq_7() -> None:
     img = np.random.default_rng(0).integers(0, 256, (160, 320, 3), dtype=np.uint8)
-    out, label = augment.flip(img, 0.3)
+    out, label = reference.flip(img, 0.3)
     assert label == -0.3
     assert np.array_equal(out[:, 0], img[:, 319]) and np.array_equal(out[:, 319 - 5], img[:, 5])
     spec = AugmentSpec(**{**NONE, "flip": 1.0})
@@ -108,14 +110,14 @@ def test_draws_are_seeded() -> None:
 
 def test_brightness_is_eq_6() -> None:
     img = np.array([[[0, 100, 250]]], np.uint8)
-    assert augment.brightness(img, 10.4).tolist() == [[[10, 110, 255]]]
-    assert augment.brightness(img, -100).tolist() == [[[0, 0, 150]]]
+    assert reference.brightness(img, 10.4).tolist() == [[[10, 110, 255]]]
+    assert reference.brightness(img, -100).tolist() == [[[0, 0, 150]]]
 
 
 def test_shadows_darken_the_quadrilaterals_only() -> None:
     img = np.full((160, 320, 3), 200, np.uint8)
     quad = np.array([[[10, 90], [100, 90], [100, 150], [10, 150]]] * 4)
-    out = augment.shadows(img, quad, 0.65)
+    out = reference.shadows(img, quad, 0.65)
     assert out[120, 50].tolist() == [130, 130, 130] and out[40, 200].tolist() == [200, 200, 200]
 
 
@@ -139,7 +141,7 @@ def test_tilt_crop_is_eq_11() -> None:
 @pytest.mark.parametrize("deg", [-1.0, -0.37, 0.5, 1.0])
 def test_tilt_leaves_no_black_corners(deg: float) -> None:
     white = np.full((160, 320, 3), 255, np.uint8)
-    out = augment.tilt(white, deg)
+    out = reference.tilt(white, deg)
     assert out.shape == white.shape
     assert out.min() == 255  # corners included: nothing of the null area is left
 
@@ -147,7 +149,7 @@ def test_tilt_leaves_no_black_corners(deg: float) -> None:
 @pytest.mark.parametrize(("tx", "ty"), [(16.0, 8.0), (-16.0, -8.0), (3.3, -0.2), (-0.01, 7.99)])
 def test_pan_leaves_no_null_area(tx: float, ty: float) -> None:
     white = np.full((160, 320, 3), 255, np.uint8)
-    assert augment.pan(white, tx, ty).min() == 255
+    assert reference.pan(white, tx, ty).min() == 255
 
 
 # ---- fast path ----

@@ -116,7 +116,7 @@ def test_train_prints_the_row_summary(tmp_path: Path, capsys) -> None:
 # ---- brightness -----------------------------------------------------------------------------------------------
 
 def test_scale_brightness_keeps_a_dark_frame_visible() -> None:
-    from models.augmentation.augment import brightness
+    from models.augmentation.reference import brightness
 
     dark = np.full((4, 4, 3), 40, np.uint8)
     assert brightness(dark, -80.0).max() == 0  # the paper's additive beta blacks it out
@@ -126,8 +126,9 @@ def test_scale_brightness_keeps_a_dark_frame_visible() -> None:
 def test_fast_path_applies_the_scale_mode_like_the_reference() -> None:
     from dataclasses import replace
 
-    from models.augmentation.augment import brightness, no_augmentation
+    from models.augmentation.augment import no_augmentation
     from models.augmentation.fastaug import FastAugmenter
+    from models.augmentation.reference import brightness
     from models.data.behavior import pipeline_for
     from models.data.framecache import build_cache
 

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from drive_server.preprocess import to_input_tensor
-from models.augmentation import augment, geometry
-from models.augmentation.augment import CAMERAS, AugmentSpec, draw_params
+from models.augmentation import augment, geometry, reference
+from models.augmentation.augment import AugmentSpec, draw_params
 from models.augmentation.fastaug import FastAugmenter
 from models.data.framecache import FrameCache
+from protocol.facts import CAMERAS
 
 NONE = dict(perspective=0.0, shadow=0.0, brightness=0.0, flip=0.0, pan=0.0, tilt=0.0)
 
@@ -44,7 +45,7 @@ def test_turned_camera_is_the_closed_loops_rotation() -> None:
     # turning right moves the road to the left of the picture
     img = np.zeros((160, 320, 3), np.uint8)
     img[:, 150:170] = 255
-    right = augment.turn(img, 4.0, spec)
+    right = reference.turn(img, 4.0, spec)
     cols = np.flatnonzero(right[120, :, 0] > 128)
     assert abs(cols.mean() - (160 - 138.56 * math.tan(math.radians(4.0)))) < 1.5  # f tan(psi) to the left
 
@@ -151,13 +152,13 @@ def test_moved_camera_moves_the_road_as_the_camera_geometry_says(x: float) -> No
     spec = AugmentSpec()
     for line in (-3.5, -1.75, 0.0, 1.75, 3.5):  # one at a time: each line where the recorded frame shows it
         recorded, expected = _road((line,)), _road((line - x,))  # the camera x to the right: the line x further left
-        moved = augment.move(recorded, x, spec)
+        moved = reference.move(recorded, x, spec)
         for row in range(80, 136, 5):
             seen, got, want = _line_columns(recorded, row), _line_columns(moved, row), _line_columns(expected, row)
             if len(seen) == 1 and 3 < seen[0] < 316 and len(want) == 1:
                 assert len(got) == 1 and abs(got[0] - want[0]) <= 1.0, (x, line, row, got, want)
     recorded = _road((-3.5, -1.75, 0.0, 1.75, 3.5))
-    moved = augment.move(recorded, x, spec)
+    moved = reference.move(recorded, x, spec)
     assert np.array_equal(moved[:66], recorded[:66])  # the sky stays
     assert np.array_equal(moved[137:], recorded[137:])  # the bonnet travels with the camera
     assert np.array_equal(moved, ViewSynthesizer().view(recorded, x, 0.0))  # the closed loop's view synthesis
@@ -179,7 +180,7 @@ def test_moved_camera_fast_path_is_the_reference() -> None:
     fast = FastAugmenter(cache, spec).images(np.zeros(16, np.int64), p)
     assert np.abs(fast[0].astype(int) - net).max() <= 1  # not moved at all: the cached frame
     for k in range(16):
-        full, label = augment.augment_reference({c: road for c in CAMERAS}, p, k, spec)
+        full, label = reference.augment_reference({c: road for c in CAMERAS}, p, k, spec)
         ref = frame_to_network_image(full, PAPER_CONTRACT).astype(np.int16)
         assert label == p.steering[k]
         assert np.abs(ref - fast[k]).mean() < 4.0, (k, np.abs(ref - fast[k]).mean())

@@ -2,7 +2,7 @@
 
 Frames come from the ``FrameCache`` (decoded once, already at the network's size), so augmenting a
 sample never touches a 320x160 image. Why that is equivalent to the literal full-resolution chain
-(``augment.augment_reference`` followed by the network resize), and where it is only approximately so:
+(``reference.augment_reference`` followed by the network resize), and where it is only approximately so:
 
 * Perspective shift picks another cached camera frame: exact.
 * Flip, pan, tilt (and the nvidia shift) are affine maps. "Transform, crop the null area, resize back"

@@ -73,8 +73,9 @@ def _write_preview(args: argparse.Namespace, config: TrainConfig) -> int:
     import numpy as np
 
     from drive_server.preprocess import blank_edges
-    from models.augmentation.augment import augment_reference, draw_params
+    from models.augmentation.augment import draw_params
     from models.augmentation.fastaug import FastAugmenter
+    from models.augmentation.reference import augment_reference
     from models.data.framecache import build_cache, load_frame
     from protocol.datalog import read_logs
     from protocol.facts import CAMERAS
