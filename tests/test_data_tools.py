@@ -84,9 +84,13 @@ def test_the_input_rule():
 
 def test_the_manifest_loads_as_data_and_ships_with_the_package():
     recs = public_recordings()
-    assert len(recs) == 39 and len({r.name for r in recs}) == 39
+    assert len(recs) == 42 and len({r.name for r in recs}) == 42
     assert all(isinstance(r, PublicRecording) and r.track in ("lake", "jungle", "mountain") for r in recs)
-    assert [len(select(recs, t)) for t in ("lake", "jungle", "mountain")] == [22, 13, 4]
+    assert [len(select(recs, t)) for t in ("lake", "jungle", "mountain")] == [22, 14, 6]
+    # #52: two more mountain drives (and a jungle one) looked at, with their quirks
+    added = {r.name: r for r in select(recs, names=["b-sh-mountain", "JCLC9027", "b-sh-jungle"])}
+    assert added["JCLC9027"].rows == RowRange(1, 1057) and "ROAD CLOSED" in added["JCLC9027"].notes
+    assert "stop-and-recover" in added["b-sh-mountain"].notes and added["b-sh-jungle"].track == "jungle"
     split = {r.name: r for r in recs if r.repository == "Ahmedyamani/Track"}
     assert split["Ahmedyamani-lake"].rows == RowRange(1, 2297) and split["Ahmedyamani-mountain"].rows.first == 2298
     assert [r.name for r in select(recs, "jungle") if r.input == "mouse"] == ["TimeToBuzz", "gsyrrakos", "dingchen",

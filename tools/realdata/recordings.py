@@ -37,6 +37,7 @@ class PublicRecording:
     # and one or more mountain recordings, so each is held out once from a model trained on all the others
     fold: str = ""
     log: str = LOG_NAME  # the log's file name in ``folder`` (the manifest's optional ``log`` column)
+    notes: str = ""  # quirks a user of the recording should know (the manifest's optional ``notes`` column)
 
     def paths(self) -> tuple[str, str]:
         """The log and the image folder inside the repository."""
@@ -49,7 +50,7 @@ def _parse(row: dict[str, str], line: int) -> PublicRecording:
                           repository=row["repository"].strip(), commit=row["commit"].strip(),
                           folder=f"{folder}/" if folder else "", rows=parse_rows(row["rows"] or ""),
                           input=row["input"].strip(), fold=(row.get("fold") or "").strip(),
-                          log=(row.get("log") or "").strip() or LOG_NAME)
+                          log=(row.get("log") or "").strip() or LOG_NAME, notes=(row.get("notes") or "").strip())
     if (rec.track not in TRACKS or rec.input not in INPUTS or len(rec.commit) != 40 or rec.repository.count("/") != 1
             or not rec.log.endswith(".csv") or any(c in rec.log for c in "/\\")):
         raise BadValue(f"{MANIFEST}:{line}: bad entry {rec}")
