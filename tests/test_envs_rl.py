@@ -30,3 +30,25 @@ def test_ppo_trains_a_few_thousand_steps_on_downsampled_frames():
     _, reward, *_ = env.step(action)
     assert np.isfinite(reward)
     env.close()
+
+
+@pytest.mark.slow
+def test_the_ppo_recipe_trains_saves_and_draws_its_curve(tmp_path, capsys):
+    """tools.envs.ppo (the Python page's PPO recipe): a few hundred steps of the small CNN on the 64x64 input."""
+    from stable_baselines3 import PPO
+
+    from tools.envs.ppo import PPORecipe, read_monitor, small_cnn, train_ppo
+
+    torch.set_num_threads(1)
+    recipe = PPORecipe(timesteps=256, envs=1, n_steps=128, batch_size=64, n_epochs=1, max_episode_steps=60)
+    path = train_ppo(recipe, tmp_path)
+    model = PPO.load(path, device="cpu")
+    assert model.num_timesteps >= 256
+    assert isinstance(model.policy.features_extractor, small_cnn())
+    weights = sum(p.numel() for p in model.policy.features_extractor.parameters())
+    assert weights < 60_000  # a small CNN, not the 19M-weight CnnPolicy of full frames
+    episodes = read_monitor(tmp_path / "monitor.csv")
+    assert len(episodes) >= 4 and all(length <= 256 for length, _ in episodes)
+    assert (tmp_path / "recipe.json").is_file()
+    pytest.importorskip("matplotlib")
+    assert (tmp_path / "curve.png").stat().st_size > 5_000

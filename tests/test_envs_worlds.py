@@ -13,7 +13,7 @@ from tools.envs import ENV_ID, DriveEnv, WorldDistribution  # noqa: E402
 from tools.envs.drive_env import check_reset_options  # noqa: E402
 
 #: three small training worlds (their files are generated once per machine), drawn without light or fog
-POOL = {"seeds": (0, 2), "pool": 2, "new_world_every": 2}
+POOL = {"seeds": (0, 2), "pool": 2, "new_world_steps": 30}
 
 
 def _episode(env, steps: int = 15, **reset):
@@ -38,35 +38,44 @@ def test_the_same_seed_draws_the_same_world_light_fog_and_spawn_and_the_same_epi
     sequences = []
     for prefetch in (True, False):
         fresh = DriveEnv(worlds={**POOL, "prefetch": prefetch}, spawn="random", jpeg=False)
-        _, info = fresh.reset(seed=7)
-        seen = [(info["world"], info["light_intensity"], info["fog"])]
-        for _ in range(4):
-            _, info = fresh.reset()
-            seen.append((info["world"], info["light_intensity"], info["fog"]))
-        sequences.append(seen)
+        sequences.append([(i["world"], i["light_intensity"], i["fog"]) for i in _episodes(fresh, 5, seed=7)])
     assert sequences[0] == sequences[1] and sequences[0][0] == (first["world"], first["light_intensity"], first["fog"])
     assert len({w for w, _, _ in sequences[0]}) > 1 and len({light for _, light, _ in sequences[0]}) == 5
 
 
+def _episodes(env, count: int, steps: int = 10, seed: int = 1) -> list[dict]:
+    """The first infos of ``count`` episodes of ``steps`` autopilot steps each, after ``reset(seed=seed)``."""
+    _, info = env.reset(seed=seed)
+    infos = [info]
+    for _ in range(count - 1):
+        for _ in range(steps):
+            _, _, _, _, info = env.step(info["expert_action"])
+        _, info = env.reset()
+        infos.append(info)
+    return infos
+
+
 def test_a_rotating_pool_of_worlds_and_light_and_fog_every_episode():
-    env = DriveEnv(worlds={"seeds": (0, 2), "pool": 1, "new_world_every": 2}, jpeg=False)
-    infos = [env.reset(seed=1)[1]] + [env.reset()[1] for _ in range(5)]
-    worlds = [i["world"] for i in infos]
+    env = DriveEnv(worlds={"seeds": (0, 2), "pool": 1, "new_world_steps": 20}, jpeg=False)
+    worlds = [i["world"] for i in _episodes(env, 6)]  # 10 steps an episode: a new world every second one
     assert worlds[0] == worlds[1] and worlds[2] == worlds[3] and worlds[4] == worlds[5]
+    infos = _episodes(env, 6)
     assert len({i["light_intensity"] for i in infos}) == 6 and len({i["fog"] for i in infos}) == 6
-    rotating = DriveEnv(worlds={"seeds": (0, 999), "pool": 2, "new_world_every": 3, "prefetch": False}, jpeg=False)
+    rotating = DriveEnv(worlds={"seeds": (0, 999), "pool": 2, "new_world_steps": 25, "prefetch": False},
+                        jpeg=False)
     _, info = rotating.reset(seed=5)
     pools = [list(rotating._pool)]
-    for episode in range(1, 7):
+    for episode in range(1, 8):
+        for _ in range(10):
+            _, _, _, _, info = rotating.step(info["expert_action"])
         _, info = rotating.reset()
         pool = rotating._pool
         assert len(pool) == 2 and info["world"] in [w for w, _ in pool]
-        if episode % 3 == 0:  # the oldest leaves, a new one comes in and is driven at once
+        if episode in (3, 6):  # 30 steps >= 25: the oldest leaves, a new one comes in and is driven at once
             assert pool[0] == pools[-1][1] and info["world"] == pool[1][0] and pool[1] not in pools[-1]
         else:
             assert pool == pools[-1]
         pools.append(list(pool))
-    assert rotating.worlds.builds >= 4
 
 
 def test_light_fog_and_the_world_can_be_pinned_per_episode_by_the_options():
@@ -122,7 +131,7 @@ def test_bad_reset_options_are_one_line_errors_before_anything_changes(options):
 
 
 @pytest.mark.parametrize("worlds", [{"seeds": (5, 1)}, {"seeds": 3}, {"light": (0, 2)}, {"fog": (2, 1)},
-                                    {"sun_deg": (100,)}, {"themes": ("lava",)}, {"new_world_every": 0},
+                                    {"sun_deg": (100,)}, {"themes": ("lava",)}, {"new_world_steps": 0},
                                     {"pool": 0}, {"seed": 1}, {"seeds": None}, "all", {"prefetch": "yes"}])
 def test_bad_distributions_are_one_line_errors_at_make(worlds):
     with pytest.raises(BadValue) as exc:

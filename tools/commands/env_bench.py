@@ -20,16 +20,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="steps of each episode of --worlds (default 1000: 67 simulated seconds)")
     parser.add_argument("--pool", type=int, default=1, metavar="P",
                         help="worlds in play at once with --worlds (default 1: a new world every episode)")
-    parser.add_argument("--new-world-every", type=int, default=1, metavar="E",
-                        help="episodes between new worlds with --worlds (default 1)")
+    parser.add_argument("--new-world-steps", type=int, default=1, metavar="S",
+                        help="steps between new worlds with --worlds (default 1: a new world every episode)")
     parser.add_argument("--profile", type=int, default=0, metavar="N",
                         help="also profile N steps on the first track (cProfile, by time of their own)")
 
 
 def run(args: argparse.Namespace) -> int:
-    if min(args.steps, args.repeats, args.threads, args.episode_steps, args.pool, args.new_world_every) < 1 \
+    if min(args.steps, args.repeats, args.threads, args.episode_steps, args.pool, args.new_world_steps) < 1 \
             or args.profile < 0 or args.worlds < 0:
-        raise CommandError("--steps, --repeats, --threads, --episode-steps, --pool and --new-world-every must be "
+        raise CommandError("--steps, --repeats, --threads, --episode-steps, --pool and --new-world-steps must be "
                            ">= 1, --profile and --worlds >= 0")
     try:
         import gymnasium  # noqa: F401
@@ -49,12 +49,12 @@ def run(args: argparse.Namespace) -> int:
             print(bench_env(track, cameras, jpeg, args.steps, args.repeats, observation=observation).row(),
                   flush=True)
     if args.worlds:
-        every = "every episode" if args.new_world_every == 1 else f"every {args.new_world_every} episodes"
+        every = "every episode" if args.new_world_steps == 1 else f"after every {args.new_world_steps:,} steps"
         print(f"\nseconds per episode of {args.episode_steps} steps from a random spawn, {args.worlds} episodes, "
               f"pool of {args.pool} generated world{'s' if args.pool > 1 else ''}, a new one {every}:")
         print(WORLDS_HEADER)
         base, *others = bench_worlds(args.worlds, args.episode_steps, pool=args.pool,
-                                     new_world_every=args.new_world_every)
+                                     new_world_steps=args.new_world_steps)
         print(base.row())
         for result in others:
             print(result.row(base), flush=True)

@@ -22,11 +22,15 @@ the paper's Eq. 14 exactly as drive_server computes them, or "steer_throttle"); 
 ``ControlLaw`` or a dict of its fields; its speed limit is a governor with steer_throttle too); ``jpeg``
 (default True: the wire's JPEG round trip); ``laps``; ``max_episode_steps``; ``spawn`` ("start" or "random");
 ``action_delay`` (1: Unity's two frames in flight); ``render_mode`` (None, "rgb_array": the centre camera as
-rendered, or "human": in a window, with pygame); and more in the config.
+rendered, or "human": in a window, with pygame); ``worlds`` (:class:`WorldDistribution`: a new world, sun,
+light and fog per episode, training worlds only); ``observation`` ("frame", or "model": the network's own
+64x64 input by a preprocessing ``contract``) and ``speed`` (a Dict observation with the speed); and more in
+the config. ``reset(options=...)`` pins one episode's world, light, fog, sun or spawn.
 
 Spaces: the observation is the centre camera's frame, uint8 (160, 320, 3) RGB, decoded from the JPEG the
-simulator would send (``jpeg=True``, the pixels drive_server and recorded datasets have); with ``cameras=3`` a
-``Dict`` of "center", "left" and "right" frames (SB3: ``MultiInputPolicy``). The action is a float32 ``Box``
+simulator would send (``jpeg=True``, the pixels drive_server and recorded datasets have), or the network's
+input (``observation="model"``); with ``cameras=3`` or ``speed=True`` a ``Dict`` of "center" (and "left" and
+"right") images and "speed" (km/h) (SB3: ``MultiInputPolicy``). The action is a float32 ``Box``
 in [-1, 1]: steering (+ = right, 1 = 25 degrees), and with ``steer_throttle`` throttle (< 0 brakes).
 
 Reward (:class:`RewardConfig`, ``reward={...}``): by default metres along the lap (about 1,003 a lake lap),

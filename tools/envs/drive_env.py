@@ -151,9 +151,11 @@ class DriveEnv(gym.Env):
         self._last_info: dict[str, Any] | None = None  # the last step's, until reset() (see _relabel_auto_reset)
         self._monitor_pipeline, self._monitor = self._load_monitor(config.monitor)
         self.worlds = shared_cache(config.worlds.pool + 2 if config.worlds else 1)
-        self._world_rng: np.random.Generator | None = None  # the distribution's draws of worlds (see reset)
+        # the distribution's own streams (see reset): the worlds that enter the pool, and each episode's pick
+        self._world_rng: np.random.Generator | None = None
+        self._pick_rng: np.random.Generator | None = None
         self._next_world: tuple[str, float] | None = None  # drawn for the next episode (being prefetched)
-        self._episodes = 0  # drawn from the distribution since the last reset with a seed
+        self._since_new = 0  # steps since the newest world of the pool entered it
         self._pool: list[tuple[str, float]] = []  # the distribution's worlds (and suns) in play, oldest first
         self._episode: Episode | None = None  # this episode's world, light and fog (None: the env's track)
         self._reduce = jpeg_reduction(self.contract)
@@ -203,6 +205,11 @@ class DriveEnv(gym.Env):
             command = self._pending.popleft()
         report = self.client.step(command, self.config.frames_per_step)
         self._steps += 1
+        worlds = self.config.worlds
+        if worlds is not None:
+            self._since_new += 1
+            if worlds.prefetch and self._next_world is None and 2 * self._since_new >= worlds.new_world_steps:
+                self._prefetch()  # halfway to a new world: build it in the background
         terminated = bool(report.intervention) and self.config.terminate_on_takeover
         if report.intervention and not terminated:
             self.client.follow()  # observe the car where the referee put it: the next action drives from there
@@ -233,21 +240,21 @@ class DriveEnv(gym.Env):
         track, built as ``rbc sim`` builds it)."""
         dist = self.config.worlds
         if dist is not None and (seed is not None or self._world_rng is None):
-            # the worlds' own stream: the same worlds for a seed, whatever the episodes did with np_random
+            # the worlds' own streams: the same worlds for a seed, whatever the episodes did with np_random
             entropy = seed if seed is not None else int(self.np_random.integers(2**62))
-            self._world_rng = np.random.default_rng([entropy, WORLD_STREAM])
-            self._episodes, self._next_world = 0, None
+            self._world_rng = np.random.default_rng([entropy, WORLD_STREAM, 0])
+            self._pick_rng = np.random.default_rng([entropy, WORLD_STREAM, 1])
+            self._since_new, self._next_world = 0, None
             self._pool = [dist.draw_world(self._world_rng) for _ in range(dist.pool)]
         track, sun = pinned.get("track"), pinned.get("sun_deg")
         if track is None and dist is not None:
-            assert self._world_rng is not None  # seeded above
-            if self._episodes and self._episodes % dist.new_world_every == 0:  # a new world, driven at once
+            assert self._world_rng is not None and self._pick_rng is not None  # seeded above
+            if self._since_new >= dist.new_world_steps:  # a new world, driven at once
                 self._pool = [*self._pool[1:], self._next_world or dist.draw_world(self._world_rng)]
-                self._next_world = None
+                self._next_world, self._since_new = None, 0
                 track, drawn_sun = self._pool[-1]
             else:
-                track, drawn_sun = self._pool[int(self._world_rng.integers(len(self._pool)))]
-            self._episodes += 1
+                track, drawn_sun = self._pool[int(self._pick_rng.integers(len(self._pool)))]
             sun = drawn_sun if sun is None else sun
         elif track is None:
             if not {"sun_deg", "light_intensity", "fog"} & set(pinned):
@@ -267,16 +274,16 @@ class DriveEnv(gym.Env):
                         cone_seed)
 
     def _prefetch(self) -> None:
-        """Build in the background the pool's worlds not built yet and the world the next reset (without a seed)
-        brings into the pool, while this episode runs."""
+        """Build in the background the pool's worlds not built yet and, from halfway to ``new_world_steps``, the
+        world the next new-world reset brings into the pool (drawn now: the draws stay those of resets)."""
         dist, rng = self.config.worlds, self._world_rng
         if dist is None or not dist.prefetch or rng is None:
             return
         for track, sun in self._pool:
             self.worlds.prefetch(self._world_key(track, sun))
-        if self._episodes % dist.new_world_every == 0:
+        if 2 * self._since_new >= dist.new_world_steps:
             if self._next_world is None:
-                self._next_world = dist.draw_world(rng)  # the next reset's draw, taken now
+                self._next_world = dist.draw_world(rng)
             self.worlds.prefetch(self._world_key(*self._next_world))
 
     # --- what the agent gets ------------------------------------------------------------------------

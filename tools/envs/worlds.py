@@ -58,12 +58,14 @@ class WorldDistribution:
     Worlds: ``seeds``, generated worlds ``first..last`` (inclusive, training seeds only), and the built-in
     ``tracks``, drawn uniformly; ``themes``, the generator's themes a world may have (None: its seven generic
     ones; a world is its seed AND its themes); ``sun_deg``, the sun raised (+) or lowered by one of these
-    angles. A world's textures take about a second to build, so the episodes drive a rotating ``pool`` of
-    worlds: each episode one of them, and every ``new_world_every`` episodes a newly drawn world replaces the
-    oldest (and is the one driven; ``prefetch``: built in the background during the episode before).
-    ``pool=1, new_world_every=1`` is a new world every episode. Each episode: ``light``, the light intensity,
-    log-uniform in ``[lo, hi]`` (None: the env's ``light_intensity``); ``fog``, the world's fog density times a
-    factor log-uniform in ``[lo, hi]`` (None: its own); the spawn with ``spawn="random"``.
+    angles. A world's textures take one to two seconds of CPU to build, as long as a thousand steps, so the
+    episodes drive a rotating ``pool`` of built worlds: each episode one of them, and at the first reset after
+    ``new_world_steps`` steps a newly drawn world replaces the oldest (and is the one driven; ``prefetch``:
+    built in the background during the steps before). The building then costs a bounded share of the steps,
+    whatever the episodes' lengths; ``pool=1, new_world_steps=1`` is a new world every episode. Each episode:
+    ``light``, the light intensity, log-uniform in ``[lo, hi]`` (None: the env's ``light_intensity``);
+    ``fog``, the world's fog density times a factor log-uniform in ``[lo, hi]`` (None: its own); the spawn
+    with ``spawn="random"``.
     """
 
     seeds: tuple[int, int] | None = (0, 999)
@@ -73,7 +75,7 @@ class WorldDistribution:
     light: tuple[float, float] | None = (0.4, 2.5)
     fog: tuple[float, float] | None = (0.5, 2.0)
     pool: int = 4
-    new_world_every: int = 10
+    new_world_steps: int = 20_000
     prefetch: bool = True
 
     def __post_init__(self) -> None:
@@ -117,7 +119,7 @@ class WorldDistribution:
                 if not 0 < lo <= hi < math.inf:
                     raise BadValue(f"worlds {name} must be (lo, hi) with 0 < lo <= hi, got {value!r}")
                 object.__setattr__(self, name, (float(lo), float(hi)))
-        for name, low in (("pool", 1), ("new_world_every", 1)):
+        for name, low in (("pool", 1), ("new_world_steps", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise BadValue(f"worlds {name} must be an integer >= {low}, got {value!r}")
