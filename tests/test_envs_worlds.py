@@ -203,3 +203,22 @@ def test_bad_observation_options_are_one_line_errors(kwargs):
     with pytest.raises(BadValue) as exc:
         DriveEnv(track="lake", **kwargs)
     assert "\n" not in str(exc.value)
+
+
+@pytest.mark.skipif(__import__("sys").platform != "linux", reason="fork-started workers are Linux's")
+def test_async_and_sync_vector_envs_draw_the_same_worlds_and_episodes():
+    """Forked workers inherit the parent's built worlds while its background build may be running: they start
+    without its threads and locks, and draw what the same environments draw in one process."""
+    DriveEnv(worlds=POOL, jpeg=False).reset(seed=0)  # a background build under way in the parent
+    make = [lambda: gym.make(ENV_ID, worlds=POOL, jpeg=False, max_episode_steps=12)] * 2
+    results = []
+    for envs in (gym.vector.AsyncVectorEnv(make, context="fork"), gym.vector.SyncVectorEnv(make)):
+        obs, infos = envs.reset(seed=[1, 2])
+        worlds = [tuple(infos["world"])]
+        for _ in range(40):  # three episodes each, a new world after 30 steps
+            obs, _, _, _, infos = envs.step(infos["expert_action"])
+            worlds.append(tuple(infos["world"]))
+        results.append((obs, worlds))
+        envs.close()
+    assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1]
+    assert len(set(results[0][1])) > 1
