@@ -104,3 +104,17 @@ def test_fit_refuses_runs_on_evaluation_worlds_and_non_nominal_calibration(tmp_p
     keep = FitPlan(model, tmp_path / "out.onnx", (), (tmp_path / "cal",), score="keep")
     with pytest.raises(BadValue, match="nominal driving on training worlds only"):
         fit_monitor(keep, say=lambda _: None)
+
+
+def test_calibration_leaves_out_the_seconds_around_a_take_over_of_the_models_own_driving() -> None:
+    """Windows before a real failure of a nominal run foresee it: they are not the nominal driving a false-alarm
+    rate is set on (nor the 4 s after the car is put back)."""
+    from models.monitoring.fit import _uneventful
+
+    t = np.arange(0, 60, 1 / 15)
+    x = np.arange(len(t), dtype=np.float32)[:, None]
+    parts = _uneventful(x, t, ((30.0, "off_road"),))
+    assert len(parts) == 2
+    assert t[int(parts[0][-1, 0])] <= 20.0 and t[int(parts[1][0, 0])] >= 34.0
+    assert sum(len(p) for p in parts) == int(((t <= 20.0) | (t >= 34.0)).sum())
+    assert len(_uneventful(x, t, ())) == 1 and len(_uneventful(x, t, ())[0]) == len(t)

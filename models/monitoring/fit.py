@@ -128,8 +128,22 @@ def _calibration_inputs(plan: FitPlan, contract: Any, say: Callable[[str], None]
         run = load_run(path)
         if run.meta.get("group") != "nominal" or run.meta.get("seed_range", "train") != "train":
             raise BadValue(f"{path}: calibration takes nominal driving on training worlds only")
-        runs.append(run.floats())
+        runs.extend(_uneventful(run.floats(), run.t, run.takeovers))
     return runs
+
+
+#: Around a take-over in a calibration run the driving is not nominal: the 10 s before it (the benchmark's own
+#: horizon: a warning there foresaw a real failure) and the 4 s after it (the car was just put back).
+BEFORE_TAKEOVER_S, AFTER_TAKEOVER_S = 10.0, 4.0
+
+
+def _uneventful(x: np.ndarray, t: np.ndarray, takeovers: tuple[tuple[float, str], ...]) -> list[np.ndarray]:
+    """The stretches of a driven run away from its take-overs, each a run of its own for the one-second means."""
+    keep = np.ones(len(t), bool)
+    for when, _ in takeovers:
+        keep &= ~((t > when - BEFORE_TAKEOVER_S) & (t < when + AFTER_TAKEOVER_S))
+    edges = np.flatnonzero(np.diff(np.r_[0, keep.astype(np.int8), 0]))
+    return [x[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True) if b > a]
 
 
 def _failure_frames(plan: FitPlan, say: Callable[[str], None]) -> tuple[np.ndarray, np.ndarray, int]:
