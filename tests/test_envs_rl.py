@@ -52,3 +52,8 @@ def test_the_ppo_recipe_trains_saves_and_draws_its_curve(tmp_path, capsys):
     assert (tmp_path / "recipe.json").is_file()
     pytest.importorskip("matplotlib")
     assert (tmp_path / "curve.png").stat().st_size > 5_000
+    from tools.envs.ppo import evaluate_ppo
+
+    rows = evaluate_ppo(path, ("lake", "world:1000000"), max_steps=30)  # an evaluation world: purpose="eval"
+    assert [r["track"] for r in rows] == ["lake", "world:1000000"]
+    assert all(r["steps"] <= 30 and r["metres"] >= 0 and not r["lap"] for r in rows)

@@ -149,6 +149,37 @@ def plot_curve(monitor: Path, picture: Path) -> Path | None:
     return picture
 
 
+#: Where a trained policy is driven once from the start: the track it learnt and five evaluation worlds.
+EVAL_TRACKS = ("lake", "mountain", *(f"world:{1_000_000 + k}" for k in range(5)))
+
+
+def evaluate_ppo(model: str | Path, tracks: tuple[str, ...] = EVAL_TRACKS, max_steps: int = 6000) -> list[dict]:
+    """Each track driven once from its start by the policy (its mean action): the metres driven before the
+    first take-over (the episode ends there), whether the lap was driven, and the take-over's cause."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    import tools.envs  # noqa: F401  (registers rbc/Drive-v0)
+
+    policy = PPO.load(str(model), device="cpu")
+    rows = []
+    for track in tracks:
+        env = gym.make("rbc/Drive-v0", track=track, observation="model", speed=True, max_episode_steps=max_steps,
+                       purpose="eval")
+        try:
+            obs, info = env.reset(seed=0)
+            done = False
+            while not done:
+                action, _ = policy.predict(obs, deterministic=True)
+                obs, _, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+        finally:
+            env.close()
+        rows.append({"track": track, "metres": round(float(info["progress_m"]), 1), "lap": bool(info["laps_done"]),
+                     "takeover": info["intervention"] or "", "steps": int(info["step"])})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m tools.envs.ppo", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", required=True, help="folder for model.zip, monitor.csv, recipe.json, curve.png")
@@ -157,7 +188,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--track", default=PPORecipe.track)
     parser.add_argument("--worlds", action="store_true", help="generated training worlds (worlds=True)")
     parser.add_argument("--seed", type=int, default=PPORecipe.seed)
+    parser.add_argument("--evaluate", action="store_true",
+                        help="do not train: drive OUT/model.zip once from the start of the lake, the mountain and five "
+                             "evaluation worlds and write OUT/evaluation.json")
     args = parser.parse_args(argv)
+    if args.evaluate:
+        rows = evaluate_ppo(Path(args.out) / "model.zip")
+        (Path(args.out) / "evaluation.json").write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
+        for row in rows:
+            print(f"{row['track']:>16}: {row['metres']:7.1f} m, " + ("lap driven" if row["lap"] else
+                  f"take-over: {row['takeover'] or 'none (time up)'}"))
+        return 0
     if args.timesteps < 1 or args.envs < 1:
         parser.error("--timesteps and --envs must be >= 1")
     recipe = PPORecipe(track=args.track, worlds={} if args.worlds else None, timesteps=args.timesteps,
