@@ -157,7 +157,6 @@ def test_a_world_run_loads_the_generated_world(monkeypatch, tmp_path):
     from tools.monitoreval import runner
     from tools.monitoreval.runset import RunSpec
     from tools.sim.driving import session
-
     from tools.sim.worldgen import resolve_track_name
 
     resolve_track_name("world:300")  # generating a world drives its autopilot through run_scenario: done first
