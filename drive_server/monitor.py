@@ -21,7 +21,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from enum import IntEnum, StrEnum
 from time import perf_counter
 from typing import Any
@@ -229,6 +229,19 @@ class MonitorState:
     def reset(self) -> None:
         self._scores.clear()
         self._sum, self._calm, self.level = 0.0, 0, Level.NORMAL
+
+
+def at_frame_rate(spec: MonitorSpec, policy: MonitorPolicy, hz: float) -> tuple[MonitorSpec, MonitorPolicy]:
+    """``spec`` and ``policy`` for frames at ``hz`` instead of the simulator's 15 Hz: the window and the
+    hand-back span as many seconds as they do at 15 Hz (a recording at 9 Hz averages 9 frames, not 15)."""
+    if not math.isfinite(hz) or not 1.0 <= hz <= 1000.0:
+        raise BadValue(f"frame rate must be 1..1000 Hz, got {hz!r}")
+
+    def frames(n: int) -> int:
+        return max(1, round(n * hz / FRAMES_PER_SECOND))
+
+    window = min(frames(spec.window), 10 * FRAMES_PER_SECOND)
+    return replace(spec, window=window), replace(policy, release_frames=frames(policy.release_frames))
 
 
 class ClientMonitor:

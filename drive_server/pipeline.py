@@ -22,6 +22,7 @@ from drive_server.monitor import (
     MonitorReading,
     MonitorSpec,
     act_on,
+    at_frame_rate,
 )
 from drive_server.preprocess import jpeg_reduction, preprocess
 from drive_server.serving import check_gain
@@ -70,11 +71,16 @@ class DrivePipeline:
         self.monitor_spec: MonitorSpec | None = found[0] if found is not None else None
         self._monitor_graph: MonitorGraph | None = found[1] if found is not None else None
 
-    def client_monitor(self, who: str = "") -> ClientMonitor | None:
-        """A new client's monitor state (None: the model carries no monitor, or it is off)."""
+    def client_monitor(self, who: str = "", frame_rate_hz: float | None = None) -> ClientMonitor | None:
+        """A new client's monitor state (None: the model carries no monitor, or it is off). ``frame_rate_hz``:
+        frames that come at another rate than the simulator's 15 Hz (a recording): the window and the hand-back
+        keep their length in seconds."""
         if self._monitor_graph is None or self.monitor_spec is None:
             return None
-        return ClientMonitor(self._monitor_graph, self.monitor_spec, self.config.monitor, who)
+        if frame_rate_hz is None:
+            return ClientMonitor(self._monitor_graph, self.monitor_spec, self.config.monitor, who)
+        spec, policy = at_frame_rate(self.monitor_spec, self.config.monitor, frame_rate_hz)
+        return ClientMonitor(self._monitor_graph, spec, policy, who)
 
     def smoother(self) -> SteeringSmoother | None:
         """A new client's smoothing state (None when off: nothing to keep)."""

@@ -24,6 +24,7 @@ from drive_server.monitor import (
     MonitorPolicy,
     MonitorSpec,
     MonitorState,
+    at_frame_rate,
     encode_graph,
 )
 from drive_server.pipeline import DriveConfig, DrivePipeline
@@ -51,6 +52,33 @@ def test_the_state_machine_warns_alarms_and_hands_back_on_the_window_mean():
     for s in [3, 3, 3]:
         state.update(s)
     assert state.episodes == {"warning": 0, "alarm": 1}
+
+
+def test_on_a_recording_at_another_rate_the_window_and_hand_back_keep_their_seconds():
+    """A real recording at 9 Hz averaged over 15 frames would average 1.7 s, not the one second calibrated on."""
+    spec, policy = at_frame_rate(MonitorSpec("s", 1.0, 2.0, window=15), MonitorPolicy(release_frames=15), 9.0)
+    assert (spec.window, policy.release_frames) == (9, 9)
+    assert at_frame_rate(MonitorSpec("s", 1.0, 2.0, window=15), MonitorPolicy(), 15.0)[0].window == 15
+    assert at_frame_rate(MonitorSpec("s", 1.0, 2.0, window=15), MonitorPolicy(), 1.0)[0].window == 1
+    from protocol.errors import BadValue
+
+    with pytest.raises(BadValue, match="frame rate"):
+        at_frame_rate(SPEC, MonitorPolicy(), float("nan"))
+
+
+def test_drive_log_monitors_a_recording_at_its_own_frame_rate(models):
+    """rbc drive-log's monitor gets the log's rate (the median interval between its frames)."""
+    import numpy as np
+
+    from tools.drivelog.drivers import recording_rate_hz
+    from tools.drivelog.path import RecordedDrive
+
+    log = RecordedDrive(frames=[], steering=np.zeros(4), speed=np.zeros(4), dt=np.array([0.11, 0.11, 0.12, 0.0]),
+                        session=np.zeros(4, int), arc=np.zeros(4))
+    assert recording_rate_hz(log) == pytest.approx(1 / 0.11)
+    pipeline = DrivePipeline(SteeringModel(models["calm"]), DriveConfig(monitor=MonitorPolicy(MonitorMode.WARN)))
+    monitor = pipeline.client_monitor(frame_rate_hz=recording_rate_hz(log))
+    assert monitor is not None and monitor.state.spec.window == 2  # the fixture's window of 3 frames at 15 Hz
 
 
 def test_a_single_spike_below_the_window_mean_raises_nothing():

@@ -15,6 +15,12 @@ from tools.drivelog.loop import Driver
 from tools.drivelog.path import RecordedDrive
 
 
+def recording_rate_hz(log: RecordedDrive) -> float:
+    """The recording's frame rate: the median interval between its frames (15 Hz when it has too few)."""
+    gaps = log.dt[np.isfinite(log.dt) & (log.dt > 0)]
+    return float(np.clip(1.0 / np.median(gaps), 1.0, 1000.0)) if len(gaps) else 15.0
+
+
 def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bias: float = 0.0,
                 smooth: float | None = None, readings: list[tuple[int, int]] | None = None,
                 gain: float | None = None) -> tuple[Driver, str]:
@@ -36,7 +42,8 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
                                  DriveConfig(smoothing=smooth, gain=gain,
                                              monitor=MonitorPolicy(MonitorMode.WARN, budget_ms=None)))
         smoother = pipeline.smoother()
-        monitor = pipeline.client_monitor()  # the model's misbehaviour monitor, if its file carries one (warn)
+        # the model's misbehaviour monitor, if its file carries one (warn), its one-second window at the log's rate
+        monitor = pipeline.client_monitor(frame_rate_hz=recording_rate_hz(log))
 
         def base(view: np.ndarray, i: int) -> float:
             steering = pipeline.steer(view, smoother, monitor)
