@@ -377,7 +377,7 @@ def test_record_and_train_on_your_laps(workspace, capsys):
     scored = printed["rbc score --data tests/data/udacity-sample --model runs/mine/model.onnx"]
     assert "0.0112" in scored  # always-0 on the sample, as the page says
     driven = printed["rbc drive-log --data my_laps --model runs/mine/model.onnx --held-out-of runs/mine"]
-    assert "degree of autonomy 100.0 %  interventions 0" in driven
+    assert "degree of autonomy 100.0 %  take-overs 0\n" in driven  # no rate of driving per take-over for none
     simulated = printed["rbc sim --model runs/mine/model.onnx --track lake"].splitlines()
     assert simulated[0] == "track lake (1003 m), driver onnx:model.onnx, speed limit 25 km/h"
     assert "[data]" in (ws / "my_recipe.toml").read_text()

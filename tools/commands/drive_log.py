@@ -114,9 +114,9 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     part = "" if rows is None else f" (of {len(log)}: {rows})"
     print(f"drive-log {args.data}: {frames} frames{part}, {result.frames} steps, {result.driving_time_s:.0f} s "
           f"driving {limit}, driver {name}")
-    print(f"degree of autonomy {result.eta:.1f} %  interventions {result.interventions}  "
-          f"({record['seconds_per_takeover']:.1f} s of driving per take-over)  offset rms {result.offset_rms_m:.2f} m  "
-          f"max {record['offset_max_m']:.2f} m")
+    rate = f" ({record['seconds_per_takeover']:.1f} s of driving per take-over)" if result.interventions else ""
+    print(f"degree of autonomy {result.eta:.1f} %  take-overs {result.interventions}{rate}")
+    print(f"offset from the driver's path: rms {result.offset_rms_m:.2f} m, max {record['offset_max_m']:.2f} m")
     if run.monitor is not None:
         m = run.monitor
         leads = ", ".join(f"{x:.1f} s" for x in m["leads_s"] if x is not None)
