@@ -98,7 +98,3 @@ def serving_alpha(text: str | None) -> float:
     """The smoothing a model's ``rbc.serving`` metadata asks for (none: off); ``BadValue`` if malformed."""
     return Serving.from_json(text).smoothing
 
-
-def serving_gain(text: str | None) -> float:
-    """The gain a model's ``rbc.serving`` metadata asks for (none: 1); ``BadValue`` if malformed."""
-    return Serving.from_json(text).gain

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 
 from protocol import SpeedUnit
 from protocol.errors import BadValue
@@ -47,12 +48,18 @@ def add_gain_argument(parser: argparse.ArgumentParser) -> None:
 def serving_gain(args: argparse.Namespace) -> float | None:
     """The ``--gain`` value (None: the model's own), or a CommandError in one line."""
     from drive_server.serving import check_gain
+
+    return _checked("--gain", args.gain, check_gain)
+
+
+def _checked(flag: str, value: float | None, check: Callable[[float], float]) -> float | None:
+    """``value`` through ``check`` (None stays None: the model's own), a ValueError as a one-line CommandError."""
     from tools.errors import CommandError
 
     try:
-        return None if args.gain is None else check_gain(args.gain)
+        return None if value is None else check(value)
     except ValueError as exc:
-        raise CommandError(f"--gain: {exc}") from None
+        raise CommandError(f"{flag}: {exc}") from None
 
 
 def add_loop_rule_arguments(parser: argparse.ArgumentParser) -> None:
@@ -76,12 +83,8 @@ def add_loop_rule_arguments(parser: argparse.ArgumentParser) -> None:
 def smooth_alpha(args: argparse.Namespace) -> float | None:
     """The ``--smooth`` value (None: the model's own), or a CommandError in one line."""
     from drive_server.smoothing import check_alpha
-    from tools.errors import CommandError
 
-    try:
-        return None if args.smooth is None else check_alpha(args.smooth)
-    except ValueError as exc:
-        raise CommandError(f"--smooth: {exc}") from None
+    return _checked("--smooth", args.smooth, check_alpha)
 
 
 def parse_speed(text: str, default_unit: str) -> tuple[float, str]:
