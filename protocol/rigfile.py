@@ -4,6 +4,8 @@
 ``rbc train`` reads it for every ``--data`` folder and stamps the one rig of its data into the model, so
 the headless simulator later shows a model the camera it learnt from. A folder without the file is a
 recording of the real simulator (or of drive_server serving it): Unity's own camera, ``unity``.
+The headless simulator also records which of its named tracks the laps were driven on (``track``), so that
+``rbc drive-log`` finds the road by that track's look instead of guessing it from the asphalt's colour.
 Stdlib only.
 """
 
@@ -30,28 +32,46 @@ def _folder(data: Path | str) -> Path:
     return data.parent if data.suffix.lower() == ".csv" else data
 
 
-def read_rig(data: Path | str) -> str:
-    """The rig of the recording in ``data`` (a folder, or its log file); :data:`REAL_RIG` without a rig file."""
+def _read(data: Path | str) -> dict[str, object] | None:
+    """The rig file's fields; None without one (or unreadable, said once)."""
     path = _folder(data) / RIG_FILE
     try:
-        value = json.loads(path.read_text(encoding="utf-8")).get("rig", REAL_RIG)
+        fields = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        return REAL_RIG
-    except (OSError, ValueError, AttributeError):
+        return None
+    except (OSError, ValueError):
         log.warning("%s: unreadable, taking the frames for the real simulator's camera", path)
-        return REAL_RIG
+        return None
+    return fields if isinstance(fields, dict) else None
+
+
+def read_rig(data: Path | str) -> str:
+    """The rig of the recording in ``data`` (a folder, or its log file); :data:`REAL_RIG` without a rig file."""
+    value = (_read(data) or {}).get("rig", REAL_RIG)
     return value if isinstance(value, str) else REAL_RIG
 
 
-def write_rig(folder: Path, rig: str, append: bool = False) -> None:
-    """Record ``rig`` for the frames in ``folder``; appending frames of another rig records :data:`MIXED`."""
+def read_track(data: Path | str) -> str | None:
+    """The named track the recording in ``data`` was driven on, where the rig file says it (headless laps of
+    one track); None otherwise (real recordings, generated worlds, laps of several tracks)."""
+    value = (_read(data) or {}).get("track")
+    return value if isinstance(value, str) and value else None
+
+
+def write_rig(folder: Path, rig: str, append: bool = False, track: str | None = None) -> None:
+    """Record ``rig`` (and the named ``track``, if one) for the frames in ``folder``; appending frames of
+    another rig records :data:`MIXED`, of another track no track."""
     folder = Path(folder)
     earlier = (folder / RIG_FILE).is_file() or any((folder / name).is_file() for name in LOG_NAMES)
-    if append and earlier and read_rig(folder) != rig:  # a real recording has no rig file: unity
-        rig = MIXED
+    if append and earlier:
+        if read_rig(folder) != rig:  # a real recording has no rig file: unity
+            rig = MIXED
+        if read_track(folder) != track:
+            track = None
     folder.mkdir(parents=True, exist_ok=True)
+    fields: dict[str, str] = {"rig": rig} | ({"track": track} if track else {})
     tmp = folder / (RIG_FILE + ".tmp")
-    tmp.write_text(json.dumps({"rig": rig}) + "\n", encoding="utf-8")
+    tmp.write_text(json.dumps(fields) + "\n", encoding="utf-8")
     tmp.replace(folder / RIG_FILE)
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from test_rules import stadium  # the small test tracks live with the rules tests
 
-from protocol.rigfile import MIXED, REAL_RIG, RIG_FILE, data_rig, read_rig, write_rig
+from protocol.rigfile import MIXED, REAL_RIG, RIG_FILE, data_rig, read_rig, read_track, write_rig
 from tools.sim.collect.dataset import CollectConfig, collect
 from tools.sim.driving.model_rig import model_rig, resolve_rig
 from tools.sim.render.camera import DEFAULT_RIG, LEGACY_RIG
@@ -45,6 +45,23 @@ def test_collect_records_the_rig_its_frames_were_rendered_with(tmp_path, rig):
     out = tmp_path / "data"
     collect(CollectConfig(track=track, rate_hz=4.0, cameras=1, camera=rig), out)
     assert json.loads((out / RIG_FILE).read_text()) == {"rig": rig}
+
+
+def test_laps_of_a_named_track_say_it_and_drive_log_finds_that_tracks_road(tmp_path):
+    # a headless lake lap's dark asphalt is nearer the mountain's colour: drive-log named it "mountain road"
+    from tools.drivelog.track import recorded_track
+
+    out = tmp_path / "laps"
+    collect(CollectConfig(track="lake", rate_hz=1.0, cameras=1), out)
+    assert read_track(out) == "lake" and recorded_track(out / "driving_log.csv") == "lake"
+    write_rig(out, "unity", append=True, track="mountain")  # laps of another track appended: none said
+    assert read_track(out) is None and read_rig(out) == "unity"
+    write_rig(tmp_path / "file", "unity", track="my_track.json")  # a track file: no profile of that name
+    assert read_track(tmp_path / "file") == "my_track.json" and recorded_track(tmp_path / "file") is None
+    assert read_track(SAMPLE) is None and recorded_track(SAMPLE) is None  # a real recording: told from its frames
+    world = tmp_path / "world"
+    collect(CollectConfig(track=stadium(tmp_path, straight=30.0, radius=16.0), rate_hz=2.0, cameras=1), world)
+    assert read_track(world) is None
 
 
 def test_the_default_rig_is_unity_and_models_of_before_keep_the_classic_camera():

@@ -59,12 +59,17 @@ def test_tables_summarise_by_track_and_mark_what_beats_always_0() -> None:
     summary = json.loads(json.dumps([t.__dict__ for t in summarise(numpy_scores)], default=str))
     assert summary[0]["at_least_95"] == 0 and summary[0]["takeovers"] == 4 and summary[0]["worst_eta"] == 20.0
     text = format_tables(scores, peer=scores[:1])
-    assert "| lake | 2 | 0.70 | 0.40 | 0.50 | 1 of 2 | 30.0 | 10.0 | 0.50 | 0.60 | 1 of 1 | 20.0 | 8.0 |" in text
+    # seconds per take-over pooled over the track: (3 x 8 s + 1 x 12 s) / 4 take-overs, not the mean of 8 and 12
+    assert "| lake | 2 | 0.70 | 0.40 | 0.50 | 1 of 2 | 30.0 | 9.0 | 0.50 | 0.60 | 1 of 1 | 20.0 | 8.0 |" in text
     assert "| a | lake | A | 10 | 0.0500 | **0.0400** | 0.50 | 0.80 | 0.60 | 20.0 (3; 8.0 s) | **0.0400** |" in text
     assert "| b | lake | B | 10 | 0.0200 | 0.0300 |" in text  # not bold: always-0 is better
     assert text.splitlines()[0].startswith("| track | recordings | r9 | mean r | r to intent |")  # the glossary's
     clean = format_tables([replace(scores[0], eta=100.0, interventions=0, seconds_per_takeover=60.0)])
     assert "| 100.0 (0) |" in clean and "60.0 s" not in clean  # no rate for no take-over
+    assert "| 100.0 | – |" in clean  # ... in the track's row either
+    # a recording without a take-over adds its driving time, not a made-up rate: (24 s + 1000 s) / 3
+    (pooled,) = summarise([scores[0], replace(scores[1], eta=100.0, interventions=0, seconds_per_takeover=1000.0)])
+    assert pooled.seconds_per_takeover == round(1024 / 3, 2)
     assert "| jungle | 1 | – | 0.60 | – | 1 of 1 | – | – | – | – | – | – | – |" in text
 
 

@@ -185,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"rows        {result.rows} ({config.cameras} camera{'s' if config.cameras > 1 else ''}, "
           f"{config.rate_hz:g} Hz, speed in {config.speed_unit})")
     print(f"laps        {laps} on {args.track}{' in both directions' if config.both_directions else ''}, "
-          f"interventions {result.interventions}")
+          f"take-overs {result.interventions}")
     print(f"zero steer  {result.zero_steer_share * 100:.1f} % of rows")
     print(f"time        {result.sim_time_s:.1f} s simulated, {result.wall_time_s:.1f} s wall, {rate:.1f} rows/s")
     return 130 if result.interrupted else (1 if result.interventions else 0)

@@ -45,8 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)")
     p.add_argument("--track", choices=tuple(TRACK_PROFILES), default=None,
                    help="how the road is found: the lake's yellow edge lines, the jungle's two lanes with a dashed "
-                        "centre line, the mountain's dark road between leaves and barriers (default: told from the "
-                        "asphalt's colour)")
+                        "centre line, the mountain's dark road between leaves and barriers (default: the track "
+                        "that rbc collect's laps name, else told from the asphalt's colour)")
     part = p.add_mutually_exclusive_group()
     part.add_argument("--rows", metavar="A-B[,C-D]",
                       help="drive only these rows of the log (1-based, inclusive), each stretch from the recorded "
@@ -96,6 +96,7 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     from tools.drivelog.pictures import write_offset_plot, write_strip
     from tools.drivelog.record import result_record
     from tools.drivelog.run import drive_recording
+    from tools.drivelog.track import recorded_track
 
     rules = _rules(args)
     log = recorded_drive(samples, args.speed_unit)
@@ -103,7 +104,8 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     bars = {"road": "road edges", "loop": "drive-log"}
     run = drive_recording(log, rules, args.model, args.baseline, args.steer_bias, smooth_alpha(args),
                           wheelbase_m=args.wheelbase, bars=lambda phase: Progress(bars[phase], unit="frame"),
-                          say=print, track=args.track, keep=keep, gain=serving_gain(args))
+                          say=print, track=args.track or recorded_track(args.data), keep=keep,
+                          gain=serving_gain(args))
     result, name, road, fit = run.result, run.driver, run.road, run.wheelbase_fit
     frames = len(log) if keep is None else int(keep.sum())
     fitted = None if fit is None else {"wheelbase_m": round(fit.wheelbase_m, 3), "pairs": fit.pairs,

@@ -9,14 +9,18 @@ concrete barriers and rock walls. A recording's track is told from its asphalt's
 straight ahead over the recording): lake asphalt is a little yellow, jungle asphalt light and grey, mountain
 asphalt dark. On the 39 public recordings that told every one right (200 frames each), the nearest other
 track's colour at least 0.8 typical spreads further than its own (kadway, jungle; 0.8-1.1 for the four closest):
-``rbc drive-log --track`` names it where a recording's colour is in doubt.
+``rbc drive-log --track`` names it where a recording's colour is in doubt; laps of the headless simulator
+name their track in their rig file (:func:`recorded_track`), whose asphalt no real track's colour matches.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+from protocol.rigfile import read_track
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,13 @@ def profile(track: str | None, asphalt_median: np.ndarray | None) -> TrackProfil
     if asphalt_median is None:
         raise ValueError("no track given, and no asphalt colour to tell it from")
     return TRACK_PROFILES[detect_track(asphalt_median)]
+
+
+def recorded_track(data: Path | str) -> str | None:
+    """The track the recording in ``data`` says it was driven on (the headless simulator's laps of one named
+    track), where a profile of that name exists; None: to be told from the frames."""
+    track = read_track(data)
+    return track if track in TRACK_PROFILES else None
 
 
 def detect_track(asphalt_median: np.ndarray) -> str:

@@ -73,7 +73,7 @@ class TrackSummary:
     mean_r: float
     beats_zero: int
     mean_eta: float | None
-    mean_seconds_per_takeover: float | None
+    seconds_per_takeover: float | None  # the track's driving seconds over its take-overs; None: none
     mean_r_to_intent: float | None = None
     mean_intent_r: float | None = None
     worst_eta: float | None = None  # the targets are per recording: every one at TARGET_ETA or more
@@ -173,12 +173,22 @@ def summarise(scores: Sequence[RecordingScore]) -> list[TrackSummary]:
         out.append(TrackSummary(
             track, len(mine), round(float(np.mean([s.pearson_r for s in mine])), 3), sum(s.beats_zero for s in mine),
             round(float(np.mean([s.eta for s in driven])), 2) if driven else None,
-            round(float(np.mean([s.seconds_per_takeover for s in driven])), 2) if driven else None,
+            _pooled_seconds_per_takeover(driven),
             _mean_of([s.r_to_intent for s in mine]), _mean_of([s.intent_r for s in mine]),
             float(min(etas)) if driven else None,
             int(sum(eta >= TARGET_ETA for eta in etas)) if driven else None,
             int(sum(s.interventions or 0 for s in driven)) if driven else None))
     return out
+
+
+def _pooled_seconds_per_takeover(driven: Sequence[RecordingScore]) -> float | None:
+    """Seconds driven per take-over over all of a track's driven recordings; None without a take-over (a
+    recording without one has no rate of its own, and averaging its driving time in would make one up)."""
+    takeovers = sum(s.interventions or 0 for s in driven)
+    if not takeovers:
+        return None
+    seconds = sum((s.seconds_per_takeover or 0.0) * max(1, s.interventions or 0) for s in driven)
+    return round(seconds / takeovers, 2)
 
 
 def _mean_of(values: Sequence[float | None]) -> float | None:

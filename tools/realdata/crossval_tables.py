@@ -26,11 +26,11 @@ def format_tables(scores: Sequence[RecordingScore], peer: Sequence[RecordingScor
     for t in summarise(scores):
         row = (f"| {t.track} | {t.recordings} | {_cell(t.mean_intent_r, '.2f')} | {t.mean_r:.2f} | "
                f"{_cell(t.mean_r_to_intent, '.2f')} | {t.beats_zero} of {t.recordings} | "
-               f"{_cell(t.mean_eta, '.1f')} | {_cell(t.mean_seconds_per_takeover, '.1f')} |")
+               f"{_cell(t.mean_eta, '.1f')} | {_cell(t.seconds_per_takeover, '.1f')} |")
         if peer:
             p = peer_by_track.get(t.track)
             row += (f" {p.mean_r:.2f} | {_cell(p.mean_r_to_intent, '.2f')} | {p.beats_zero} of {p.recordings} | "
-                    f"{_cell(p.mean_eta, '.1f')} | {_cell(p.mean_seconds_per_takeover, '.1f')} |"
+                    f"{_cell(p.mean_eta, '.1f')} | {_cell(p.seconds_per_takeover, '.1f')} |"
                     if p else " – | – | – | – | – |")
         lines.append(row)
     lines += ["", "| recording | track | fold | frames | always-0 MSE | MSE | r | r9 | r to intent | "

@@ -36,7 +36,7 @@ from tools.sim.driving.rules import LapResult
 from tools.sim.driving.scenario import ScenarioConfig
 from tools.sim.driving.simulation import Simulation
 from tools.sim.track.cones import place_cones
-from tools.sim.track.files import get_track
+from tools.sim.track.files import builtin_tracks, get_track
 
 log = logging.getLogger(__name__)
 
@@ -149,7 +149,8 @@ def collect(config: CollectConfig, out_dir: Path, overwrite: bool = False, appen
         raise BadValue("--resume continues a collection: not with --overwrite or --append")
     kept = kept_rows(out_dir) if resume else []
     first = EPOCH if resume else prepare_output(out_dir, overwrite, append)
-    write_rig(out_dir, config.camera, append=append or resume)  # before any frame: rbc train reads it
+    named = config.track if config.track in builtin_tracks() else None  # rbc drive-log finds its road by it
+    write_rig(out_dir, config.camera, append=append or resume, track=named)  # before any frame: rbc train reads it
     start = first if start is None else start
     result = CollectResult(out_dir=out_dir, rows=0, zero_steer_rows=0)
     directions = (False, True) if config.both_directions else (False,)
