@@ -15,7 +15,7 @@ pytest.importorskip("torch", reason="the train extra is not installed")
 from protocol.datalog_writer import LOG_NAME  # noqa: E402
 from protocol.errors import BadValue  # noqa: E402
 from protocol.runrecords import file_sha256, read_json  # noqa: E402
-from tools.dagger import loop, rollout  # noqa: E402
+from tools.dagger import loop, rollout, summary  # noqa: E402
 from tools.dagger.config import DaggerConfig, budgets_from  # noqa: E402
 from tools.dagger.report import comparison_table, frames_to_target, plot_curve, verdict  # noqa: E402
 
@@ -107,6 +107,17 @@ def test_every_visited_frame_is_labelled_by_the_expert(clean):
     env = DriveEnv(world_seed=first.world_seed, spawn="random", action_delay=1, law={"speed_limit_kmh": 25.0})
     _, info = env.reset(seed=first.reset_seed)
     assert float(_log(clean / "round-00" / "data")[0][3]) == pytest.approx(float(info["expert_action"][0]), abs=1e-6)
+
+
+def test_who_drives_is_one_draw_a_step_from_the_rounds_mixing_stream(clean):
+    """The wrapper (tools.dagger.mixing) decides with the round's own stream, [seed, round, STREAM_MIX], one draw a
+    step across the round's episodes: the same decisions for the same seed."""
+    from tools.dagger.config import STREAM_MIX
+
+    config = _config()
+    drivers = [f["driver"] for f in _frames(clean / "round-01" / "data")]
+    draws = np.random.default_rng([config.seed, 1, STREAM_MIX]).random(len(drivers))
+    assert drivers == ["expert" if d < config.beta(1) else "learner" for d in draws]
 
 
 def test_each_round_trains_on_the_aggregate_and_records_it(clean):
@@ -236,9 +247,9 @@ def test_the_perturbations_are_rbc_evals_table9_rows(clean, tmp_path):
     for found in scores["perturbations"].values():  # a two-step model is taken over on lake: every range is empty
         assert found["text"] and {"lower", "upper", "unit"} <= set(found)
     assert scores["all"]["runs"] == 1 and "worlds" not in scores
-    row = loop.round_row({"round": 0, "mode": "dagger", "beta": 1.0, "expert_frames": 60, "eval": scores,
-                          "collection": {"learner_steps": 0, "takeovers": 0}})
-    assert "orientation" in loop.rounds_table([row])
+    row = summary.round_row({"round": 0, "mode": "dagger", "beta": 1.0, "expert_frames": 60, "eval": scores,
+                             "collection": {"learner_steps": 0, "takeovers": 0}})
+    assert "orientation" in summary.rounds_table([row])
 
 
 def test_the_recorded_clock_runs_at_the_environments_control_rate(tmp_path, monkeypatch):

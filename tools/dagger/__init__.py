@@ -5,8 +5,10 @@ per step with probability beta, decaying), the autopilot labels every visited fr
 steering (``info["expert_action"]``), the rounds' frames are aggregated, the learner is retrained from scratch on
 them with ``rbc train``'s pipeline and exported to ONNX, and each round's model is scored on unseen generated
 worlds and the built-in tracks exactly as ``rbc eval`` scores a model. :mod:`tools.dagger.loop` has the rounds,
-:mod:`~tools.dagger.rollout` the data, :mod:`~tools.dagger.scoring` the evaluation, :mod:`~tools.dagger.report`
-the comparison with behavioral cloning at equal expert frames; docs/python.md the measurement.
+:mod:`~tools.dagger.rollout` the data, :mod:`~tools.dagger.mixing` the mixing and labelling (a Gymnasium
+wrapper) with :mod:`~tools.dagger.beta`'s schedules, :mod:`~tools.dagger.scoring` the evaluation,
+:mod:`~tools.dagger.summary` the rounds' table, :mod:`~tools.dagger.report` the comparison with behavioral cloning
+at equal expert frames; docs/python.md the measurement.
 
 Why a loop of our own and not the ``imitation`` library's ``SimpleDAggerTrainer`` (imitation 1.0.1,
 the newest on the package index):
@@ -29,7 +31,10 @@ the newest on the package index):
   data alone) and keep recordings ``rbc train`` reads unchanged, the wire's JPEGs, about 10 kB a frame.
 
 What we keep of it: the algorithm as it implements it (per-step mixing, each step the expert's action with
-probability beta, and every visited state labelled by the expert whoever drove) and its round structure.
+probability beta, and every visited state labelled by the expert whoever drove), its round structure and its
+shape: a beta schedule object (:class:`~tools.dagger.beta.BetaSchedule`) and the mixing as a wrapper of the
+environment (:class:`~tools.dagger.mixing.ExpertMixing`, as its ``InteractiveTrajectoryCollector`` wraps a
+VecEnv), reading the expert from the environment's public ``info["expert_action"]``.
 """
 
 from __future__ import annotations

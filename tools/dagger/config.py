@@ -14,6 +14,7 @@ from typing import Any
 
 from protocol.errors import BadValue
 from protocol.facts import DEPLOY_SPEED_KMH
+from tools.dagger.beta import BetaSchedule, ConstantBetaSchedule, ExponentialBetaSchedule
 from tools.sim.render.camera import RIGS
 from tools.sim.worldgen import WorldGenConfig, world_seed_range
 
@@ -104,13 +105,16 @@ class DaggerConfig:
         """Expert-labelled frames collected in round ``round_``."""
         return self.budgets[round_] - (self.budgets[round_ - 1] if round_ else 0)
 
+    def beta_schedule(self) -> BetaSchedule:
+        """Who drives, round by round: in "dagger" 1 in round 0 (there is no learner yet: behavioral cloning on
+        the expert's laps) and beta0 * beta_decay ** round_ after that; in "bc" 1 in every round."""
+        if self.mode == "bc":
+            return ConstantBetaSchedule(1.0)
+        return ExponentialBetaSchedule(self.beta0, self.beta_decay)
+
     def beta(self, round_: int) -> float:
-        """The probability that the expert drives a step in round ``round_``: 1 in round 0 (there is no learner
-        yet: behavioral cloning on the expert's laps) and in every round of "bc"; beta0 * beta_decay ** round_
-        after that."""
-        if self.mode == "bc" or round_ == 0:
-            return 1.0
-        return float(self.beta0 * self.beta_decay ** round_)
+        """The probability that the expert drives a step in round ``round_`` (:meth:`beta_schedule`)."""
+        return self.beta_schedule()(round_)
 
     def world_gen_config(self) -> WorldGenConfig:
         """The generator settings of the evaluation worlds (``rbc eval --world-config``'s rules)."""

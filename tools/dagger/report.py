@@ -14,7 +14,7 @@ from typing import Any
 from protocol.errors import BadValue
 from protocol.runrecords import code_version, read_json, write_json, write_text
 from tools.dagger.config import DaggerConfig
-from tools.dagger.loop import SUMMARY_JSON
+from tools.dagger.summary import SUMMARY_JSON
 from tools.sim.driving.rules import TARGET_ETA
 
 CURVE = "curve.png"

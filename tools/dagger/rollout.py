@@ -2,10 +2,12 @@
 
 Each step the expert (the autopilot's pure-pursuit steering, ``info["expert_action"]``) drives with probability
 beta and the learner (the previous round's ONNX model through drive_server's pipeline, :class:`OnnxPolicy`)
-otherwise; either way the frame is recorded with the expert's steering as its label. A take-over does not end
-the episode (``terminate_on_takeover=False``): the referee puts the car back and the learner drives on, so the
-states after its mistakes are labelled too. Episodes start anywhere along a new training world (its seed drawn
-from the training range; the environment refuses evaluation worlds) and last ``episode_steps`` steps.
+otherwise; either way the frame is recorded with the expert's steering as its label (the mixing and labelling
+are :class:`tools.dagger.mixing.ExpertMixing`, a Gymnasium wrapper; one stream of its draws per round, one draw a
+step, seeded [seed, round, STREAM_MIX]). A take-over does not end the episode (``terminate_on_takeover=False``):
+the referee puts the car back and the learner drives on, so the states after its mistakes are labelled too.
+Episodes start anywhere along a new training world (its seed drawn from the training range; the environment
+refuses evaluation worlds) and last ``episode_steps`` steps.
 
 The folder is a recording as ``rbc collect`` writes one, so ``rbc train`` reads it unchanged:
 ``driving_log.csv`` (steering = the expert's label, throttle and brake as applied, speed in mph), ``IMG/`` (the
@@ -22,9 +24,9 @@ import io
 import logging
 import shutil
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,7 +42,10 @@ from tools.sim.collect.dataset import EPOCH
 from tools.sim.worldgen import world_seed_range
 
 if TYPE_CHECKING:
-    from tools.envs.drive_env import DriveEnv
+    import gymnasium as gym
+
+    from tools.dagger.mixing import ExpertMixing
+    from tools.envs import OnnxPolicy
 
 log = logging.getLogger(__name__)
 
@@ -84,9 +89,8 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
     ``learner``: the ONNX model that drives with probability 1 - beta (None only where beta is 1).
     ``progress(frames, total)`` is called after every episode.
     """
-    import gymnasium as gym
-
-    from tools.envs import ENV_ID, OnnxPolicy
+    from tools.dagger.mixing import AskedCommand, ExpertMixing
+    from tools.envs import OnnxPolicy
 
     beta = config.beta(round_)
     if learner is None and beta < 1.0:
@@ -98,71 +102,104 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
     if policy is not None and policy.camera_rig != config.camera:
         raise BadValue(f"the learner {learner} was trained on the {policy.camera_rig} camera, the data is "
                        f"recorded with {config.camera}")
-    mix = np.random.default_rng([config.seed, round_, STREAM_MIX])
+    mix = np.random.default_rng([config.seed, round_, STREAM_MIX])  # one stream of decisions across the episodes
     final = out.resolve()  # the log names each frame where it will be once the folder is renamed into place
     partial = final.with_name(final.name + ".partial")
     shutil.rmtree(partial, ignore_errors=True)  # what a killed collection left: collected again, the same
     (partial / IMAGE_DIR).mkdir(parents=True)
     write_rig(partial, config.camera)
-    cameras = CAMERAS[:config.cameras]
-    stats = CollectionStats()
-    disagreements: list[float] = []
-    table = io.StringIO()
-    rows = csv.writer(table, lineterminator="\n")
-    rows.writerow(FRAMES_COLUMNS)
-    start = EPOCH + dt.timedelta(days=round_)
-    clock = 0.0
     with LogWriter(partial / LOG_NAME) as writer:
+        recorder = _Recorder(partial, final, writer, EPOCH + dt.timedelta(days=round_), total)
         for number, episode in enumerate(plan):
-            env = gym.make(ENV_ID, world_seed=episode.world_seed, purpose="train", spawn="random",
-                           cameras=config.cameras, camera=config.camera, law=law,
-                           action_delay=config.action_delay, max_episode_steps=config.episode_steps,
-                           terminate_on_takeover=False, disable_env_checker=True)
-            drive = cast("DriveEnv", env.unwrapped)  # what gym.make builds for ENV_ID
+            env = ExpertMixing(AskedCommand(_make_env(config, episode, law)), beta, rng=mix)
             try:
-                obs, info = env.reset(seed=episode.reset_seed)
-                for step in range(config.episode_steps):
-                    if stats.frames >= total:
-                        break
-                    expert = float(info["expert_action"][0])
-                    learned = policy.steering(obs["center"] if config.cameras == 3 else obs, info) if policy else None
-                    by_expert = policy is None or bool(mix.random() < beta)
-                    when = start + dt.timedelta(seconds=round(clock + step / drive.config.control_hz, 3))
-                    paths = _write_frames(partial / IMAGE_DIR, cameras, when, obs, info)
-                    action = np.array([expert if by_expert else learned], np.float32)
-                    command = drive.command(action)
-                    writer.write([str(final / IMAGE_DIR / p.name) for p in paths], expert, max(0.0, command.throttle),
-                                 max(0.0, -command.throttle), from_kmh(info["speed_kmh"], "mph"))
-                    obs, _, _, truncated, info = env.step(action)
-                    stats.frames += 1
-                    stats.expert_steps += by_expert
-                    stats.learner_steps += not by_expert
-                    stats.takeovers += bool(info["intervention"])
-                    if learned is not None:
-                        disagreements.append(abs(learned - expert))
-                    rows.writerow([stats.frames, number, step, episode.world_seed, "expert" if by_expert else "learner",
-                                   f"{expert:.7g}", "" if learned is None else f"{learned:.7g}",
-                                   f"{info['cte_m']:.4f}", f"{info['speed_kmh']:.3f}", info["intervention"]])
-                    if truncated:
-                        break
+                hz = float(env.get_wrapper_attr("config").control_hz)
+                _drive_episode(env, policy, config, number, episode, hz, recorder)
             finally:
                 env.close()
-            clock += config.episode_steps / drive.config.control_hz + 10.0  # a pause: a new session
+            recorder.clock += config.episode_steps / hz + 10.0  # a pause: a new session
+            stats = recorder.stats
             stats.episodes += 1
             stats.world_seeds += (episode.world_seed,)
             if progress is not None:
                 progress(stats.frames, total)
             if stats.frames >= total:
                 break
+    stats = recorder.stats
     if stats.frames != total:
         raise RuntimeError(f"round {round_}: {stats.frames} frames collected, {total} planned")
-    stats.abs_disagreement = float(np.mean(disagreements)) if disagreements else 0.0
-    (partial / FRAMES_CSV).write_text(table.getvalue(), encoding="utf-8")
+    stats.abs_disagreement = float(np.mean(recorder.disagreements)) if recorder.disagreements else 0.0
+    (partial / FRAMES_CSV).write_text(recorder.table.getvalue(), encoding="utf-8")
     write_json(partial / SUMMARY, {"round": round_, "beta": beta, "learner": str(learner) if learner else None,
                                    **asdict(stats)})
     shutil.rmtree(final, ignore_errors=True)
     partial.rename(final)
     return stats
+
+
+def _make_env(config: DaggerConfig, episode: Episode, law: ControlLaw) -> gym.Env[Any, Any]:
+    """``rbc/Drive-v0`` on the episode's training world; a take-over puts the car back and the episode goes on."""
+    import gymnasium
+
+    from tools.envs import ENV_ID
+
+    return gymnasium.make(ENV_ID, world_seed=episode.world_seed, purpose="train", spawn="random",
+                          cameras=config.cameras, camera=config.camera, law=law, action_delay=config.action_delay,
+                          max_episode_steps=config.episode_steps, terminate_on_takeover=False,
+                          disable_env_checker=True)
+
+
+@dataclass
+class _Recorder:
+    """Where a round's frames go: the frames and the driving log, ``frames.csv``'s rows, the statistics."""
+
+    partial: Path
+    final: Path
+    writer: LogWriter
+    start: dt.datetime
+    total: int
+    clock: float = 0.0  # seconds from ``start`` to the episode's first frame
+    stats: CollectionStats = field(default_factory=CollectionStats)
+    disagreements: list[float] = field(default_factory=list)
+    table: io.StringIO = field(default_factory=io.StringIO)
+
+    def __post_init__(self) -> None:
+        self.rows = csv.writer(self.table, lineterminator="\n")
+        self.rows.writerow(FRAMES_COLUMNS)
+
+
+def _drive_episode(env: ExpertMixing, policy: OnnxPolicy | None, config: DaggerConfig, number: int,
+                   episode: Episode, hz: float, recorder: _Recorder) -> None:
+    """One episode: the learner (when there is one) is asked every step, the wrapper decides who drives and
+    labels the frame; the frame, its label and what happened are recorded."""
+    cameras = CAMERAS[:config.cameras]
+    stats = recorder.stats
+    obs, info = env.reset(seed=episode.reset_seed)
+    for step in range(config.episode_steps):
+        if stats.frames >= recorder.total:
+            break
+        learned = policy.steering(obs["center"] if config.cameras == 3 else obs, info) if policy else None
+        when = recorder.start + dt.timedelta(seconds=round(recorder.clock + step / hz, 3))
+        paths = _write_frames(recorder.partial / IMAGE_DIR, cameras, when, obs, info)
+        speed_mph = from_kmh(info["speed_kmh"], "mph")
+        obs, _, _, truncated, info = env.step(None if learned is None else np.array([learned], np.float32))
+        done = env.last
+        assert done is not None  # set by the step
+        expert, throttle = float(done.label[0]), info["command"].throttle
+        recorder.writer.write([str(recorder.final / IMAGE_DIR / p.name) for p in paths], expert,
+                              max(0.0, throttle), max(0.0, -throttle), speed_mph)
+        stats.frames += 1
+        stats.expert_steps += done.by_expert
+        stats.learner_steps += not done.by_expert
+        stats.takeovers += bool(info["intervention"])
+        if learned is not None:
+            recorder.disagreements.append(abs(learned - expert))
+        recorder.rows.writerow([stats.frames, number, step, episode.world_seed,
+                                "expert" if done.by_expert else "learner", f"{expert:.7g}",
+                                "" if learned is None else f"{learned:.7g}", f"{info['cte_m']:.4f}",
+                                f"{info['speed_kmh']:.3f}", info["intervention"]])
+        if truncated:
+            break
 
 
 def _write_frames(folder: Path, cameras: tuple[str, ...], when: dt.datetime, obs, info) -> list[Path]:
