@@ -154,6 +154,60 @@ def test_command_modules_hold_no_library_code_and_do_not_import_each_other():
         assert not [i for i in _imports(path) if i.startswith("tools.commands.")], f"{name} imports a command"
 
 
+def _in_the_command_line_layer(name: str) -> bool:
+    """Where an ``argparse.Namespace`` belongs: the rbc subcommands (tools.commands), a package's command line (a
+    module named cli or __main__: rbc's tools.cli, drive_server's), and tools.arguments, the command line's toolkit
+    of flags several subcommands share (``add_*`` builds them, ``smooth_alpha``/``serving_gain`` read them back,
+    ``MovedToRecipe`` is an argparse action); only that layer imports it
+    (test_only_the_command_line_imports_its_argument_toolkit)."""
+    return (name == "tools.commands" or name.startswith("tools.commands.") or name == "tools.arguments"
+            or name.rsplit(".", 1)[-1] in ("cli", "__main__"))
+
+
+def _namespace_parameters(path: Path) -> list[str]:
+    """``file:line function(parameter)`` of every parameter annotated ``argparse.Namespace`` (or ``Namespace``,
+    quoted or not) of every function, method and nested function in the file."""
+    file = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else path.name
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            a = node.args
+            params = [*a.posonlyargs, *a.args, *a.kwonlyargs, *(p for p in (a.vararg, a.kwarg) if p is not None)]
+            found += [f"{file}:{node.lineno} {node.name}({p.arg})" for p in params if p.annotation is not None
+                      and re.search(r"\bNamespace\b", ast.unparse(p.annotation))]
+    return found
+
+
+def test_no_library_function_takes_an_argparse_namespace():
+    """Issue 51: the benchmarks' library functions took the command's whole ``argparse.Namespace`` (sim-bench's
+    bench_track, lap_wall_time and write_sheet, train-bench's benchmark, rbc bench's bench_one), and rbc data
+    crossval's orchestration lived in its command; now a command parses its flags into a frozen plan
+    (SimBenchPlan, TrainBenchPlan, LatencyPlan, CrossvalPlan, whose fields are the flags' defaults) and the library
+    takes the plan, so it can be called without a command line and says what it reads."""
+    found = [hit for name, path in MODULES.items() if not _in_the_command_line_layer(name)
+             for hit in _namespace_parameters(path)]
+    assert found == []
+
+
+def test_the_namespace_check_finds_a_planted_parameter(tmp_path):
+    planted = tmp_path / "planted.py"
+    planted.write_text("import argparse\nfrom argparse import Namespace\n\n"
+                       "def bench(track, args: argparse.Namespace, n: int = 3):\n    pass\n\n"
+                       "class Runner:\n    async def go(self, *, opts: 'Namespace | None' = None) -> Namespace:\n"
+                       "        def inner(ns: Namespace): ...\n        return inner\n\n"
+                       "def fine(plan: object, namespace_count: int, args=None) -> None:\n    pass\n")
+    assert sorted(_namespace_parameters(planted)) == [
+        "planted.py:4 bench(args)", "planted.py:8 go(opts)", "planted.py:9 inner(ns)"]
+
+
+def test_only_the_command_line_imports_its_argument_toolkit():
+    """tools.arguments may read a Namespace because it is part of the command line; a library module importing it
+    would bring the command line's shapes into the library."""
+    assert [name for name, path in MODULES.items() if "tools.arguments" in _imports(path)
+            and not _in_the_command_line_layer(name)] == []
+    assert _in_the_command_line_layer("drive_server.cli") and not _in_the_command_line_layer("tools.bench.latency")
+
+
 def test_no_import_cycles():
     graph = {name: {i for i in _imports(path) if i in MODULES and i != name} for name, path in MODULES.items()}
     # a package's __init__ importing its own submodules is how re-exports work, not a cycle of jobs

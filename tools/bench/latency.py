@@ -8,22 +8,22 @@ on the weights. The server runs as a child process unless ``--server URL`` point
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import multiprocessing as mp
 import queue
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drive_server.stats import STAGES
+from tools.errors import CommandError
 from tools.wire.frames import SourceFrame, log_frames, synthetic_frames
-from tools.wire.server_process import ServerProcess
+from tools.wire.server_process import ServerProcess, ServerStartError
 from tools.wire.unity_client import UnityWireClient
 
 if TYPE_CHECKING:
@@ -33,6 +33,25 @@ if TYPE_CHECKING:
 log = logging.getLogger("rbc.bench")
 
 DEFAULT_LOG = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
+
+
+@dataclass(frozen=True)
+class LatencyPlan:
+    """What one ``rbc bench`` measures; the command's flags and their defaults are these fields."""
+
+    server: str | None = None  # a running server's URL (None: start one per model)
+    model: Path | None = None  # an ONNX model (None: ``arch`` built with random weights)
+    arch: str = "shallow"  # architecture built without a model; "both": shallow and pilotnet
+    frames: int = 2000  # measured frames per client
+    warmup: int = 200  # unmeasured frames per client first
+    clients: int = 1  # concurrent closed-loop clients, one process each
+    log_dir: Path | None = None  # driving log the frames come from (None: DEFAULT_LOG, else synthetic frames)
+    threads: int = 1  # ONNX Runtime threads of the started server
+    workers: int = 1  # worker processes of the started server
+    stock_transport: bool = False  # start the server without transport tuning
+    record: Path | None = None  # start the server with --record DIR
+    monitor: str | None = None  # the started server's --monitor (None: its own default)
+    json_out: Path | None = None  # also write the results as JSON here
 
 
 @dataclass
@@ -139,27 +158,73 @@ def format_table(result: BenchResult) -> str:
     return "\n".join(rows)
 
 
-def bench_one(args: argparse.Namespace, label: str, model: Path | None, log_dir: Path | None) -> BenchResult:
-    if args.server:
-        rtts, rate = drive(args.server, log_dir, args.clients, args.frames, args.warmup)
-        return BenchResult(label, "(external server)", args.clients, args.frames, args.warmup,
+def bench_one(plan: LatencyPlan, label: str, model: Path | None) -> BenchResult:
+    """One model (None: ``plan.server``'s) measured as ``plan`` says."""
+    if plan.server:
+        rtts, rate = drive(plan.server, plan.log_dir, plan.clients, plan.frames, plan.warmup)
+        return BenchResult(label, "(external server)", plan.clients, plan.frames, plan.warmup,
                            _percentiles_ms(rtts), round(rate, 1))
     assert model is not None
     with tempfile.TemporaryDirectory(prefix="rbc_bench_") as tmp:
         stats_path = Path(tmp) / "stats.json"
-        server_args = ["--log-every", "0", "--threads", str(args.threads), "--workers", str(args.workers)]
-        if args.stock_transport:
+        server_args = ["--log-every", "0", "--threads", str(plan.threads), "--workers", str(plan.workers)]
+        if plan.stock_transport:
             server_args.append("--stock-transport")
-        if getattr(args, "record", None) is not None:
-            server_args += ["--record", str(args.record)]
-        server_args += ["--monitor", getattr(args, "monitor", "warn")]
+        if plan.record is not None:
+            server_args += ["--record", str(plan.record)]
+        if plan.monitor is not None:
+            server_args += ["--monitor", plan.monitor]
         server = ServerProcess(model, server_args, stats_json=stats_path)
         server.start()
         try:
-            rtts, rate = drive(server.url, log_dir, args.clients, args.frames, args.warmup)
+            rtts, rate = drive(server.url, plan.log_dir, plan.clients, plan.frames, plan.warmup)
         finally:
             server.stop()
         stats = json.loads(stats_path.read_text()) if stats_path.is_file() else {}
     stats.pop("clients", None)
-    return BenchResult(label, str(model), args.clients, args.frames, args.warmup, _percentiles_ms(rtts),
-                       round(rate, 1), stats, args.workers)
+    return BenchResult(label, str(model), plan.clients, plan.frames, plan.warmup, _percentiles_ms(rtts),
+                       round(rate, 1), stats, plan.workers)
+
+
+def _models(plan: LatencyPlan, folder: Path) -> list[tuple[str, Path | None]]:
+    """(label, model) of each run: the external server's, ``plan.model``, or random weights saved in ``folder``."""
+    if plan.server:
+        return [("external", None)]
+    if plan.model is not None:
+        return [(plan.model.stem, plan.model)]
+    names = ["shallow", "pilotnet"] if plan.arch == "both" else [plan.arch]
+    try:
+        from tools.bench.onnx_builders import ARCHS, save_model
+
+        return [(f"{n} (random weights, {ARCHS[n].params:,} params)", save_model(n, folder / f"{n}.onnx"))
+                for n in names]
+    except ModuleNotFoundError as exc:
+        raise CommandError("building the benchmark's random-weight model needs the package 'onnx'",
+                           'pip install -e ".[train]", or pass --model PATH') from exc
+
+
+def run_bench(plan: LatencyPlan) -> int:
+    """``rbc bench``: each model's table printed, the JSON written; the exit status (1: a run failed)."""
+    if plan.clients < 1 or plan.frames < 1 or plan.warmup < 0:
+        log.error("--clients and --frames must be >= 1, --warmup >= 0")
+        return 2
+    _, source = load_frames(plan.log_dir)
+    results = []
+    with tempfile.TemporaryDirectory(prefix="rbc_bench_models_") as tmp:
+        for label, model in _models(plan, Path(tmp)):
+            workers = "" if plan.server or plan.workers == 1 else f", server with {plan.workers} workers"
+            print(f"\n== {label}: {plan.clients} client(s) x {plan.frames} frames (+{plan.warmup} warm-up), "
+                  f"{source}{workers}")
+            try:
+                result = bench_one(plan, label, model)
+            except (ServerStartError, RuntimeError, OSError) as exc:
+                log.error("benchmark failed: %s", exc)
+                return 1
+            print(format_table(result))
+            results.append(result)
+    if plan.json_out is not None:
+        from protocol.runrecords import write_json
+
+        write_json(plan.json_out, {"frames_source": source, "runs": [asdict(r) for r in results]})
+        print(f"\nwrote {plan.json_out}")
+    return 0

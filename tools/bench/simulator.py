@@ -9,23 +9,73 @@ CPU-time rates (the latter stays meaningful when other processes share the cores
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from protocol.facts import DEPLOY_SPEED_KMH, JPEG_QUALITY
+from tools.bench.vehicle_models import inprocess_loop, physics_step_costs
 from tools.sim.pictures.text import draw_text
+from tools.sim.render.camera import DEFAULT_RIG
 from tools.sim.render.renderer import Renderer
 from tools.sim.render.world import Pose, clear_caches, get_world
 from tools.sim.track.cones import place_cones
+from tools.sim.track.files import load_track
 from tools.sim.track.road import Track
+from tools.sim.vehicle.kinematic import VEHICLE_KINDS
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SimBenchPlan:
+    """What one ``rbc sim-bench`` measures; the command's flags and their defaults are these fields."""
+
+    tracks: tuple[str, ...] = ("lake", "mountain")  # built-in track names, track files or world:SEED
+    frames: int = 600  # frames per timing run
+    repeats: int = 3  # timing runs; the best is reported
+    threads: int = 1  # OpenCV threads (1: per-core numbers)
+    camera: str = DEFAULT_RIG
+    cones: int = 20  # cones for the lake-with-cones run (0: none)
+    seed: int = 1  # cone placement seed
+    sheet: Path | None = Path("out/sim_sheet.png")  # the contact sheet of sample frames (None: none)
+    lap: bool = True  # the closed-loop lap over the socket
+    vehicles: tuple[str, ...] = VEHICLE_KINDS  # car models for the physics, in-process and socket figures
+
+
+def run_sim_bench(plan: SimBenchPlan) -> None:
+    """Every figure of ``rbc sim-bench``, printed as it is measured, and the contact sheet."""
+    from tools.sim.worldgen.generate import resolve_track_name
+
+    cv2.setNumThreads(plan.threads)
+    print(f"rbc sim-bench: 320x160 RGB, {plan.camera} camera rig, OpenCV threads {plan.threads}, "
+          f"best of {plan.repeats} x {plan.frames} frames")
+    specs = [resolve_track_name(t) for t in plan.tracks]  # world:SEED -> its file
+    tracks = [load_track(t) for t in specs]
+    for track in tracks:
+        bench_track(track, plan)
+    lake = next((t for t in tracks if t.name == "lake"), None)
+    if lake is not None and plan.cones:
+        bench_track(lake, plan, cones=place_cones(lake, plan.cones, plan.seed), builds=False)
+    print("\nphysics per step (best of runs):")
+    for line in physics_step_costs(plan.repeats):
+        print(line)
+    print("in-process closed loop, render + JPEG + physics + referee (autopilot driving, one OpenCV thread):")
+    for spec in specs:
+        for vehicle in plan.vehicles:
+            print(inprocess_loop(spec, vehicle))
+    for vehicle in plan.vehicles:
+        report = lap_wall_time(tracks, plan, vehicle)
+        if report:
+            print(report)
+    if plan.sheet is not None:
+        path = write_sheet(tracks, plan.sheet, plan.cones, plan.seed)
+        print(f"contact sheet: {path}")
 
 
 def driving_poses(track: Track, n: int) -> list[Pose]:
@@ -57,7 +107,7 @@ def _time_frames(fn, poses: list[Pose], repeats: int) -> tuple[float, float]:
     return max(wall), max(cpu)
 
 
-def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None = None, builds: bool = True) -> None:
+def bench_track(track: Track, plan: SimBenchPlan, cones: np.ndarray | None = None, builds: bool = True) -> None:
     label = f"{track.name}" + (f" + {len(cones)} cones" if cones is not None else "")
     if builds:
         clear_caches()
@@ -80,18 +130,18 @@ def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None
         t0 = time.perf_counter()
         world = get_world(track, cones=cones)
         print(f"\n{label}: world build {time.perf_counter() - t0:.2f} s")
-    renderer = Renderer(world, rig=args.camera)
-    poses = driving_poses(track, args.frames)
-    best, cpu = _time_frames(lambda p: renderer.render(p, "center"), poses, args.repeats)
+    renderer = Renderer(world, rig=plan.camera)
+    poses = driving_poses(track, plan.frames)
+    best, cpu = _time_frames(lambda p: renderer.render(p, "center"), poses, plan.repeats)
     print(f"  centre camera: {best:6.0f} frames/s wall ({1e3 / best:.2f} ms/frame), {cpu:.0f} frames per CPU-second")
     best3, cpu3 = _time_frames(lambda p: [renderer.render(p, c) for c in ("left", "center", "right")],
-                               poses, args.repeats)
+                               poses, plan.repeats)
     print(f"  3 cameras:     {best3:6.0f} steps/s = {3 * best3:.0f} frames/s wall, "
           f"{3 * cpu3:.0f} frames per CPU-second")
     if builds:
-        dim, dim_cpu = _time_frames(lambda p: renderer.render(p, "center", light_intensity=0.6), poses, args.repeats)
+        dim, dim_cpu = _time_frames(lambda p: renderer.render(p, "center", light_intensity=0.6), poses, plan.repeats)
         jit, jit_cpu = _time_frames(lambda p: renderer.render(p, "center", pitch_deg=0.5, roll_deg=-0.4), poses,
-                              args.repeats)
+                              plan.repeats)
         print(f"  centre camera, light intensity 0.6: {dim:.0f} frames/s wall ({dim_cpu:.0f}/CPU-s); "
               f"with pitch/roll jitter: {jit:.0f} ({jit_cpu:.0f}/CPU-s)")
         frames = [cv2.cvtColor(renderer.render(p), cv2.COLOR_RGB2BGR) for p in poses[:200]]
@@ -103,7 +153,7 @@ def bench_track(track: Track, args: argparse.Namespace, cones: np.ndarray | None
               f"{np.mean(sizes) / 1024:.1f} KiB/frame")
 
 
-def lap_wall_time(tracks: list[Track], args: argparse.Namespace, vehicle: str = "kinematic") -> str | None:
+def lap_wall_time(tracks: list[Track], plan: SimBenchPlan, vehicle: str = "kinematic") -> str | None:
     """Closed loop over the socket: one lock-step lap of lake against a real drive_server, on ONE core.
 
     This process and the server it starts are pinned to the same CPU (children inherit the
@@ -111,7 +161,7 @@ def lap_wall_time(tracks: list[Track], args: argparse.Namespace, vehicle: str = 
     inference, control and physics. Uses the bundled simplistic model (random weights if absent), not
     the default model, so the figure stays comparable with the benchmark's history.
     """
-    if args.no_lap or not any(t.name == "lake" for t in tracks):
+    if not plan.lap or not any(t.name == "lake" for t in tracks):
         return None
     import os
     import tempfile
@@ -162,8 +212,10 @@ def _pose_at(track: Track, s: float, offset: float = 0.0) -> Pose:
     return Pose(x - math.sin(h) * offset, y + math.cos(h) * offset, h)
 
 
-def write_sheet(tracks: list[Track], args: argparse.Namespace) -> Path:
-    """Rows of four labelled frames: each track, the bridge, cones, light intensity and direction sweeps."""
+def write_sheet(tracks: list[Track], sheet_path: Path, cones: int = SimBenchPlan.cones,
+                seed: int = SimBenchPlan.seed) -> Path:
+    """Rows of four labelled frames: each track, the bridge, ``cones`` cones placed by ``seed`` on the lake (0:
+    none), light intensity and direction sweeps; written to ``sheet_path``."""
     rows: list[list[np.ndarray]] = []
     by_name = {t.name: t for t in tracks}
     for track in tracks:
@@ -180,12 +232,12 @@ def write_sheet(tracks: list[Track], args: argparse.Namespace) -> Path:
             rows.append([_label(r.render(_pose_at(track, b.from_s + d, lane)), f"bridge {d:+.0f} m")
                          for d in (-25.0, -8.0, 10.0, 35.0)])
     lake = by_name.get("lake")
-    if lake is not None and args.cones:
-        cones = place_cones(lake, args.cones, args.seed)
-        r = Renderer(get_world(lake, cones=cones))
+    if lake is not None and cones:
+        placed = place_cones(lake, cones, seed)
+        r = Renderer(get_world(lake, cones=placed))
         tiles = []
         for k, ahead in enumerate((6.0, 10.0, 16.0, 25.0)):
-            proj = lake.project(*cones[3 * k])
+            proj = lake.project(*placed[3 * k])
             tiles.append(_label(r.render(_pose_at(lake, proj.s - ahead)), f"cone {3 * k}, {ahead:.0f} m ahead"))
         rows.append(tiles)
         r = Renderer(get_world(lake))
@@ -198,6 +250,6 @@ def write_sheet(tracks: list[Track], args: argparse.Namespace) -> Path:
     width = max(len(r) for r in rows)
     blank = np.zeros_like(rows[0][0])
     sheet = np.concatenate([np.concatenate(r + [blank] * (width - len(r)), 1) for r in rows], 0)
-    args.sheet.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(args.sheet), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
-    return args.sheet
+    sheet_path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(sheet_path), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+    return sheet_path

@@ -9,17 +9,18 @@ projects the wall time of the full run.
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import statistics
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 from models.data.behavior import pipeline_for
+from models.training.train_config import TrainConfig
 
 PAPER_TRAIN_SAMPLES = 9680
 PAPER_TOTAL_SAMPLES = 12101
@@ -39,7 +40,21 @@ class Rate:
         return f"{self.median:8.0f} samples/s  (range {lo:.0f}-{hi:.0f} over {len(self.samples_per_s)} runs)"
 
 
-def benchmark(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class TrainBenchPlan:
+    """What one ``rbc train-bench`` measures; the command's flags and their defaults are these fields."""
+
+    data: tuple[Path | str, ...] = ()  # recordings whose frames are repeated to the paper's size (none: synthetic)
+    behavior: str = TrainConfig.behavior
+    arch: str = TrainConfig.arch
+    approach: str = TrainConfig.approach
+    steps: int = 150  # batches per measurement
+    repeat: int = 3  # measurements per figure (the median is reported)
+    threads: int | None = None  # PyTorch threads (None: as rbc train)
+    seed: int = 0  # seed of the synthetic frames and the augmentations
+
+
+def benchmark(plan: TrainBenchPlan) -> int:
     import torch
 
     from models.augmentation.fastaug import FastAugmenter
@@ -47,34 +62,34 @@ def benchmark(args: argparse.Namespace) -> int:
     from models.networks.nets import build_model, count_parameters
     from models.training.train import default_threads, steps_per_epoch
 
-    pipeline = pipeline_for(args.behavior, args.arch, args.approach)
-    threads = args.threads or default_threads(args.arch)
+    pipeline = pipeline_for(plan.behavior, plan.arch, plan.approach)
+    threads = plan.threads or default_threads(plan.arch)
     torch.set_num_threads(threads)
     cv2.setNumThreads(1)
-    cache, steering, sides, decode_rate = _paper_sized_cache(args, pipeline)
+    cache, steering, sides, decode_rate = _paper_sized_cache(plan.data, plan.seed, pipeline)
     n = cache.frames.shape[1]
     train_idx = np.arange(PAPER_TRAIN_SAMPLES)
     tset = TrainingSet(train_idx, steering[train_idx], sides[train_idx], pipeline.deletion_rate, 256)
     augmenter = FastAugmenter(cache, pipeline.augment)
-    model = build_model(args.arch, pipeline.contract.height, pipeline.contract.width)
+    model = build_model(plan.arch, pipeline.contract.height, pipeline.contract.width)
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     loss_fn = torch.nn.MSELoss()
     print(f"dataset: {n} samples x {len(cache.cameras)} camera(s) at {pipeline.contract.width}x"
-          f"{pipeline.contract.height} ({cache.nbytes / 1e6:.0f} MB cache); {args.arch} "
-          f"({count_parameters(model)} params), {args.behavior}/{args.approach}; torch threads {threads}, "
+          f"{pipeline.contract.height} ({cache.nbytes / 1e6:.0f} MB cache); {plan.arch} "
+          f"({count_parameters(model)} params), {plan.behavior}/{plan.approach}; torch threads {threads}, "
           f"{torch.get_num_threads()} in use, 1 batch thread")
 
     cpu: dict[str, list[float]] = {"augment": [], "train": []}
 
     def augment_only(epoch: int) -> float:
         t, c = time.perf_counter(), time.thread_time()
-        for _ in epoch_batches(augmenter, tset, args.seed, epoch, 0, args.steps):
+        for _ in epoch_batches(augmenter, tset, plan.seed, epoch, 0, plan.steps):
             pass
-        cpu["augment"].append(args.steps * 256 / (time.thread_time() - c))
-        return args.steps * 256 / (time.perf_counter() - t)
+        cpu["augment"].append(plan.steps * 256 / (time.thread_time() - c))
+        return plan.steps * 256 / (time.perf_counter() - t)
 
     batches = [(torch.from_numpy(x), torch.from_numpy(y))
-               for _, x, y in epoch_batches(augmenter, tset, args.seed, 99, 0, 20)]
+               for _, x, y in epoch_batches(augmenter, tset, plan.seed, 99, 0, 20)]
 
     def train_step(x: torch.Tensor, y: torch.Tensor) -> None:
         optimizer.zero_grad(set_to_none=True)
@@ -84,21 +99,21 @@ def benchmark(args: argparse.Namespace) -> int:
 
     def train_only(_: int) -> float:
         t, c = time.perf_counter(), time.thread_time()
-        for k in range(args.steps):
+        for k in range(plan.steps):
             train_step(*batches[k % len(batches)])
         if threads == 1:  # one intra-op thread runs in the calling thread: its CPU time is the step's
-            cpu["train"].append(args.steps * 256 / (time.thread_time() - c))
-        return args.steps * 256 / (time.perf_counter() - t)
+            cpu["train"].append(plan.steps * 256 / (time.thread_time() - c))
+        return plan.steps * 256 / (time.perf_counter() - t)
 
     def end_to_end(epoch: int) -> float:
-        source = Prefetcher(epoch_batches(augmenter, tset, args.seed, epoch, 0, args.steps))
+        source = Prefetcher(epoch_batches(augmenter, tset, plan.seed, epoch, 0, plan.steps))
         t = time.perf_counter()
         try:
             for _, x, y in source:
                 train_step(torch.from_numpy(x), torch.from_numpy(y))
         finally:
             source.close()
-        return args.steps * 256 / (time.perf_counter() - t)
+        return plan.steps * 256 / (time.perf_counter() - t)
 
     def validate(_: int) -> float:
         model.eval()
@@ -115,7 +130,7 @@ def benchmark(args: argparse.Namespace) -> int:
     load_before = os.getloadavg()[0]
     timings: dict[str, float] = {}
     aug, trn, e2e, val = Rate([]), Rate([]), Rate([]), Rate([])
-    for r in range(args.repeat):  # interleaved, so a busy moment on a shared machine hits all figures alike
+    for r in range(plan.repeat):  # interleaved, so a busy moment on a shared machine hits all figures alike
         augmenter.timings = timings
         aug.samples_per_s.append(augment_only(r))
         augmenter.timings = None
@@ -129,7 +144,7 @@ def benchmark(args: argparse.Namespace) -> int:
     print(f"augmentation (1 thread):      {aug}")
     total = sum(timings.values())
     for stage, seconds in sorted(timings.items(), key=lambda kv: -kv[1]):
-        print(f"    {stage:16s} {1e3 * seconds / (args.steps * args.repeat):6.2f} ms/batch  "
+        print(f"    {stage:16s} {1e3 * seconds / (plan.steps * plan.repeat):6.2f} ms/batch  "
               f"({100 * seconds / total:4.1f} %)")
     print(f"training fwd+bwd+Adam:        {trn}")
     print(f"end to end (train + batches): {e2e}")
@@ -160,7 +175,7 @@ def benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
-def _paper_sized_cache(args: argparse.Namespace, pipeline):
+def _paper_sized_cache(data_dirs: tuple[Path | str, ...], seed: int, pipeline):
     """Frames of the given recordings (or synthetic ones) repeated to the paper's 12,101 samples."""
     from models.data.framecache import FrameCache
     from models.data.trainingdata import prepare_data
@@ -168,15 +183,15 @@ def _paper_sized_cache(args: argparse.Namespace, pipeline):
     cams = 3 if pipeline.augment.uses_side_cameras else 1
     c = pipeline.contract
     decode_rate = 0.0
-    if args.data:
+    if data_dirs:
         t = time.perf_counter()
-        data = prepare_data(args.data, pipeline, args.seed)
+        data = prepare_data(data_dirs, pipeline, seed)
         decode_rate = data.cache.frames.shape[0] * len(data.dataset.samples) / (time.perf_counter() - t)
         base = data.cache.frames[:, data.usable]
         steering = data.steering[data.usable]
         sides = data.has_sides[data.usable]
     else:
-        rng = np.random.default_rng(args.seed)
+        rng = np.random.default_rng(seed)
         small = rng.integers(0, 256, (cams, 64, c.height // 4 + 1, c.width // 4 + 1, 3), dtype=np.uint8)
         base = np.stack([[cv2.resize(f, (c.width, c.height), interpolation=cv2.INTER_CUBIC) for f in cam]
                          for cam in small])
