@@ -85,6 +85,40 @@ def test_the_measure_discriminates(tmp_path: Path, driver: list[str], passes: bo
     assert (tmp_path / "strip.jpg").stat().st_size > 1000 and (tmp_path / "offset.png").stat().st_size > 1000
 
 
+def test_each_take_over_gets_a_picture_of_the_seconds_before_it(tmp_path: Path, capsys) -> None:
+    # issue 52: sorting take-overs into the model's faults and the measure's needs the views before each one
+    import cv2
+
+    from protocol.datalog import read_log
+    from tools.drivelog.loop import LoopRules, drive
+    from tools.drivelog.path import recorded_drive
+    from tools.drivelog.pictures import write_takeover_strips
+
+    data = _curve_log(tmp_path)
+    takeovers = tmp_path / "takeovers"
+    assert main(["drive-log", "--data", str(data), "--baseline", "zero", "--wheelbase", "2.6", "--lane", "path",
+                 "--handback", "0", "--strip", str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png"),
+                 "--takeovers", str(takeovers)]) == 0
+    pictures = sorted(takeovers.glob("takeover-*.jpg"))
+    out = capsys.readouterr().out
+    takes = int(out.split("take-overs ")[1].split()[0])
+    assert takes >= 1 and len(pictures) == takes and f"take-overs {takes} picture(s) in {takeovers}" in out
+    sheet = cv2.imread(str(pictures[0]))
+    log = recorded_drive(read_log(data)[0])
+    h, w = read_jpeg_file(log.frames[0]).shape[:2]
+    assert sheet.shape[0] == 2 * h and sheet.shape[1] % w == 0  # the car's views above the driver's frames
+    rules = LoopRules(lane="path", wheelbase_m=2.6, handback_s=0.0)
+    kept = drive(log, lambda view, i: 0.0, rules, snapshots=0, history_s=1.0)
+    assert len(kept.before_takeovers) == kept.interventions >= 1
+    times = np.concatenate([[0.0], np.cumsum(log.dt[:-1])])
+    for take, views in zip(kept.takeovers, kept.before_takeovers, strict=True):
+        assert views and views[-1].takeover and views[-1].step == take.frame  # ends at the take-over's view
+        assert all(times[take.frame] - times[v.step] <= 1.0 + 1e-9 for v in views)  # none older than 1 s
+    assert drive(log, lambda view, i: 0.0, rules, snapshots=0).before_takeovers == []  # kept only when asked
+    with pytest.raises(ValueError, match="history_s"):
+        write_takeover_strips(drive(log, lambda view, i: 0.0, rules, snapshots=0), log, tmp_path / "none")
+
+
 def test_a_model_drives_through_the_serving_pipeline(tmp_path: Path) -> None:
     model = Path(__file__).resolve().parents[1] / "models" / "pretrained" / "simplistic.onnx"
     out = tmp_path / "r.json"

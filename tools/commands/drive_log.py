@@ -13,6 +13,8 @@ from models.networks.runfiles import CONFIG
 from tools.arguments import add_gain_argument, add_loop_rule_arguments, add_smooth_argument, serving_gain, smooth_alpha
 from tools.errors import CommandError
 
+TAKEOVER_HISTORY_S = 3.0  # seconds before each take-over that --takeovers shows
+
 if TYPE_CHECKING:
     from tools.drivelog.loop import LoopRules
 
@@ -58,6 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="picture of synthesized views (take-overs framed in red)")
     p.add_argument("--plot", type=Path, default=Path("drive_log_out/offset.png"),
                    help="picture of the lateral offset over the log")
+    p.add_argument("--takeovers", type=Path, metavar="DIR",
+                   help="also write one picture per take-over into DIR: the car's views in the 3 s before it above "
+                        "the driver's frames of the same moments (to tell the model's faults from the measure's)")
     p.add_argument("--calibrate", action="store_true",
                    help="instead of driving: fit the camera model to the log's side cameras and print the fit")
     p.add_argument("--calibrate-rows", type=int, default=40, metavar="N", help="rows used by --calibrate")
@@ -93,7 +98,7 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     from protocol.runrecords import code_version, write_json
     from tools.console import Progress
     from tools.drivelog.path import recorded_drive
-    from tools.drivelog.pictures import write_offset_plot, write_strip
+    from tools.drivelog.pictures import write_offset_plot, write_strip, write_takeover_strips
     from tools.drivelog.record import result_record
     from tools.drivelog.run import drive_recording
     from tools.drivelog.track import recorded_track
@@ -105,7 +110,7 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     run = drive_recording(log, rules, args.model, args.baseline, args.steer_bias, smooth_alpha(args),
                           wheelbase_m=args.wheelbase, bars=lambda phase: Progress(bars[phase], unit="frame"),
                           say=print, track=args.track or recorded_track(args.data), keep=keep,
-                          gain=serving_gain(args))
+                          gain=serving_gain(args), history_s=TAKEOVER_HISTORY_S if args.takeovers else 0.0)
     result, name, road, fit = run.result, run.driver, run.road, run.wheelbase_fit
     frames = len(log) if keep is None else int(keep.sum())
     fitted = None if fit is None else {"wheelbase_m": round(fit.wheelbase_m, 3), "pairs": fit.pairs,
@@ -131,6 +136,9 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     title = f"{name} on {Path(args.data).name}: eta {result.eta:.1f} %, {result.interventions} take-overs"
     print(f"strip {write_strip(result, args.strip)}")
     print(f"plot  {write_offset_plot(result, args.plot, title)}")
+    if args.takeovers:
+        pictures = write_takeover_strips(result, log, args.takeovers)
+        print(f"take-overs {len(pictures)} picture(s) in {args.takeovers}")
     if args.json:
         write_json(args.json, record)
         print(f"json  {args.json}")

@@ -26,6 +26,7 @@ more than 0.5 m from a real one (``views="nearest"``; ``"centre"``: the centre c
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -127,6 +128,8 @@ class LoopResult:
     off_road_s: float = 0.0  # log time where the recorded driver was off the road: driven by the person, not counted
     limits: np.ndarray | None = None  # (steps, 2): the offsets (m) at which a take-over came, left and right
     person: np.ndarray | None = None  # (steps,) True where a person drove after a take-over (rules.handback_s)
+    # per take-over, the car's views in the seconds before it, oldest first (``drive``'s ``history_s``)
+    before_takeovers: list[list[Snapshot]] = field(default_factory=list)
 
     @property
     def interventions(self) -> int:
@@ -169,13 +172,15 @@ def _view(synth: ViewSynthesizer, drive_log: RecordedDrive, i: int, e: float, ps
 
 def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules(),
           camera: UnityCamera = DEFAULT_CAMERA, snapshots: int = 8,
-          on_step: Callable[[int], None] | None = None, road: RoadEdges | None = None) -> LoopResult:
+          on_step: Callable[[int], None] | None = None, road: RoadEdges | None = None,
+          history_s: float = 0.0) -> LoopResult:
     """Run ``driver`` along every session of the recorded drive, one step per recorded frame interval.
 
     The car drives at the recorded speed capped at ``rules.speed_limit_kmh`` (0: no cap), so where the
     person drove faster it takes more steps than there are frames. ``snapshots`` evenly spaced views are
     kept (plus the view before each take-over, up to the same number). ``on_step(i)``: the frame reached.
     ``road``: the road's edges in every frame (:func:`tools.drivelog.road.estimate_road`), for ``lane="road"``.
+    ``history_s``: also keep, for each take-over, the car's views of that many seconds before it (log time).
     """
     synth = ViewSynthesizer(camera)
     frame_limits = lane_limits(rules, road, len(drive_log))
@@ -188,6 +193,8 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
     person: list[bool] = []
     takeovers: list[Takeover] = []
     shots: list[Snapshot] = []
+    recent: deque[tuple[float, Snapshot]] = deque()  # (log time, view) of the last history_s seconds
+    before: list[list[Snapshot]] = []
     keep = set(np.linspace(0, n - 1, snapshots + 2).astype(int)[1:-1]) if snapshots else set()
     k_path = curvature(drive_log.steering, rules.wheelbase_m)
     # where the recorded driver left the road (onto the dirt) there is no road to keep to: the person drives
@@ -203,6 +210,7 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
         s, e, psi = 0.0, 0.0, 0.0
         last = -1
         person_until = -1.0  # log time (s) until which a person drives after a take-over
+        recent.clear()
         clock = 0.0
         for _ in range(MAX_STEPS_PER_FRAME * len(steps)):
             i = steps.start + max(0, int(np.searchsorted(arc, s, side="right")) - 1)
@@ -229,11 +237,19 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             s, e, psi = advance(s, e, psi, v, dt, float(k_car), float(k_path[i]))
             over = not frame_limits[i, 0] <= e <= frame_limits[i, 1]
             fresh = i != last and i in keep
+            if history_s > 0 and view is not None:
+                recent.append((clock, Snapshot(i, view, offsets[-1], headings[-1], delta, over,
+                                               (float(frame_limits[i, 0]), float(frame_limits[i, 1])))))
+            while recent and recent[0][0] < clock - history_s:
+                recent.popleft()
             if view is not None and (fresh or (over and sum(x.takeover for x in shots) < snapshots)):
                 shots.append(Snapshot(i, view, offsets[-1], headings[-1], delta, over,
                                       (float(frame_limits[i, 0]), float(frame_limits[i, 1]))))
             if over:
                 takeovers.append(Takeover(i, moving_time, e, len(offsets) - 1))
+                if history_s > 0:
+                    before.append([shot for _, shot in recent])
+                    recent.clear()
                 e, psi = 0.0, 0.0  # a person puts the car back on the recorded path
                 person_until = clock + rules.handback_s  # ... and drives it there before handing back
             if on_step and i != last:
@@ -241,4 +257,4 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             last = i
     return LoopResult(len(offsets), moving_time, takeovers, np.array(offsets), np.array(headings),
                       np.array(steer), shots, rules, off_road_time, np.array(limits).reshape(-1, 2),
-                      np.array(person, bool))
+                      np.array(person, bool), before)

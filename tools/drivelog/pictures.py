@@ -11,7 +11,9 @@ import cv2
 import numpy as np
 
 from protocol.errors import BadValue
-from tools.drivelog.loop import LoopResult
+from protocol.jpeg import read_jpeg_file
+from tools.drivelog.loop import LoopResult, Snapshot
+from tools.drivelog.path import RecordedDrive
 from tools.sim.pictures.text import draw_text
 
 _RED, _GREY, _BLUE, _WHITE = (60, 60, 230), (150, 150, 150), (200, 120, 40), (245, 245, 245)
@@ -41,6 +43,45 @@ def write_strip(result: LoopResult, path: Path, columns: int = 4) -> Path:
         sheet[r * h:(r + 1) * h, c * w:(c + 1) * w] = tile
     _write(path, sheet)
     return path
+
+
+def write_takeover_strips(result: LoopResult, log: RecordedDrive, folder: Path, columns: int = 4) -> list[Path]:
+    """One picture per take-over (``folder/takeover-NN.jpg``): the car's views in the seconds before it (top,
+    the last one the take-over's) above the recorded frames of the same moments (what the driver saw), each
+    labelled with its time before the take-over, offset from the driver's path, heading error and steering;
+    the pictures to tell the model's faults from the measure's (``drive(history_s=...)`` keeps the views)."""
+    if len(result.before_takeovers) != result.interventions:
+        raise BadValue("the views before the take-overs were not kept (drive with history_s > 0)")
+    times = np.concatenate([[0.0], np.cumsum(log.dt[:-1])])
+    paths = []
+    for k, (takeover, views) in enumerate(zip(result.takeovers, result.before_takeovers, strict=True), 1):
+        chosen = _spread(views, columns)
+        if not chosen:
+            continue
+        h, w = chosen[0].view.shape[:2]
+        sheet = np.zeros((2 * h, len(chosen) * w, 3), np.uint8)
+        for c, shot in enumerate(chosen):
+            ahead = times[shot.step] - times[takeover.frame]
+            car = cv2.cvtColor(shot.view, cv2.COLOR_RGB2BGR)
+            draw_text(car, f"{ahead:+.1f} s  e {shot.offset_m:+.2f} m  psi {shot.heading_deg:+.1f}  "
+                           f"steer {shot.steering:+.2f}", (4, 14), px=11, box=True)
+            if shot.takeover:
+                cv2.rectangle(car, (1, 1), (w - 2, h - 2), _RED, 3)
+            recorded = cv2.resize(cv2.cvtColor(read_jpeg_file(log.frames[shot.step]), cv2.COLOR_RGB2BGR), (w, h))
+            draw_text(recorded, f"the driver's frame #{shot.step}, steer {log.steering[shot.step]:+.2f}", (4, 14),
+                      px=11, box=True)
+            sheet[:h, c * w:(c + 1) * w] = car
+            sheet[h:, c * w:(c + 1) * w] = recorded
+        paths.append(folder / f"takeover-{k:02d}.jpg")
+        _write(paths[-1], sheet)
+    return paths
+
+
+def _spread(views: list[Snapshot], n: int) -> list[Snapshot]:
+    """``n`` of ``views`` evenly spread in order, the last always among them."""
+    if len(views) <= n:
+        return list(views)
+    return [views[int(round(j))] for j in np.linspace(0, len(views) - 1, n)]
 
 
 def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[int, int] = (1000, 300)) -> Path:

@@ -49,18 +49,15 @@ class RecordingRun:
 def monitor_outcome(log: RecordedDrive, result: LoopResult, readings: list[tuple[int, int]]) -> dict[str, Any]:
     """Which take-overs the monitor foresaw, and how early: the benchmark's rules on the recording's own clock
     (each take-over counts as leaving the road; ones right after another are left out as in the benchmark)."""
-    from tools.monitoreval.scoring import DEFAULT_RULES, RunTrace, episodes, first_warning_leads
+    from tools.monitoreval.scoring import DEFAULT_RULES, RunTrace, episodes, foresight
 
     clock = np.concatenate([[0.0], np.cumsum(np.maximum(log.dt, 0.0))])[:len(log)]
     t = np.array([clock[i] for i, _ in readings], dtype=np.float64)
     level = np.array([lv for _, lv in readings], dtype=np.uint8)
     takeovers = [(float(clock[k.frame]), "off_road") for k in result.takeovers]
     trace = RunTrace("drive-log", "real", t, level, takeovers, float(clock[-1]) if len(clock) else 0.0)
-    leads = [lead for *_, lead in first_warning_leads(trace, DEFAULT_RULES)]
-    return {"takeovers_scored": len(leads), "foreseen": sum(x is not None for x in leads),
-            "foreseen_1s": sum(x is not None and x >= 1.0 for x in leads),
-            "leads_s": [None if x is None else round(x, 2) for x in leads],
-            "episodes": int(len(episodes(trace, DEFAULT_RULES))), "frames_scored": len(readings)}
+    return foresight(trace, DEFAULT_RULES) | {"episodes": int(len(episodes(trace, DEFAULT_RULES))),
+                                              "frames_scored": len(readings)}
 
 
 def _with_bar(bars: Bars, phase: str, work: Callable[[Bar | None], T]) -> T:
@@ -97,7 +94,8 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
                     baseline: str | None = None, steer_bias: float = 0.0, smooth: float | None = None,
                     wheelbase_m: float | None = None, snapshots: int = 8, bars: Bars = None,
                     say: Callable[[str], None] | None = None, track: str | None = None,
-                    keep: np.ndarray | None = None, gain: float | None = None) -> RecordingRun:
+                    keep: np.ndarray | None = None, gain: float | None = None,
+                    history_s: float = 0.0) -> RecordingRun:
     """Drive ``model`` (or a ``baseline``: ``recorded`` or ``zero``) along the recording by ``rules`` (None: the
     defaults, rbc drive-log's).
 
@@ -105,7 +103,8 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
     metadata asks) and biased
     by ``steer_bias``; the wheelbase is ``wheelbase_m`` or fitted to the frames (``rules.wheelbase_m`` is
     replaced by it); the road is found only for ``lane="road"``, by ``track``'s profile (None: told from the
-    frames). ``snapshots``: views kept for the strip. ``keep`` (a flag per frame): drive only those frames, each
+    frames). ``snapshots``: views kept for the strip; ``history_s``: the views of that many seconds before
+    each take-over kept too. ``keep`` (a flag per frame): drive only those frames, each
     stretch of them from the recorded path (:mod:`tools.drivelog.rows`); the road and the wheelbase are still
     found on the whole recording.
     """
@@ -121,7 +120,7 @@ def drive_recording(log: RecordedDrive, rules: LoopRules | None = None, model: P
 
     def loop(bar: Bar | None) -> LoopResult:
         on_step = None if bar is None else (lambda j: bar(j + 1, len(log)))
-        return drive(log, driver, rules, snapshots=snapshots, on_step=on_step, road=road)
+        return drive(log, driver, rules, snapshots=snapshots, on_step=on_step, road=road, history_s=history_s)
 
     result = _with_bar(bars, "loop", loop)
     return RecordingRun(result, name, road, fit, monitor_outcome(log, result, readings) if readings else None)
