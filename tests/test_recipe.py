@@ -76,10 +76,10 @@ def test_every_config_field_has_one_place_and_the_config_keeps_the_defaults() ->
     ("[training]\nepochs = 2.5\n", "x.toml: [training] epochs: wrong type: 2.5 is a number, not a whole number"),
     ("[export]\nmirror_average = 1\n", "[export] mirror_average: wrong type: 1 is a whole number, not true/false"),
     ("[network]\narch = \"resnet\"\n", '[network] arch: "resnet" is not one of "shallow", "pilotnet", '),
-    ("[augmentation]\nyaw_gain = 9.0\n", "x.toml: yaw gain must be 0..5, got 9.0"),
-    ("[augmentation]\noffset_aug = 1.5\n", "x.toml: offset augmentation share must be 0..1, got 1.5"),
-    ("[augmentation]\noffset_range = 0.0\n", "x.toml: offset range must be above 0 and at most 4 m, got 0.0"),
-    ("[augmentation]\noffset_lookahead = 0.5\n", "x.toml: offset lookahead must be 1..100 m, got 0.5"),
+    ("[augmentation]\nyaw_gain = 9.0\n", "x.toml: yaw_gain must be 0..5, got 9.0"),
+    ("[augmentation]\noffset_aug = 1.5\n", "x.toml: offset_aug must be 0..1, got 1.5"),
+    ("[augmentation]\noffset_range = 0.0\n", "x.toml: offset_range must be above 0 and at most 4 m, got 0.0"),
+    ("[augmentation]\noffset_lookahead = 0.5\n", "x.toml: offset_lookahead must be 1..100 m, got 0.5"),
     ("[augmentation]\noffset_range = \"2\"\n", 'offset_range: wrong type: "2" is a string, not a number'),
     ("[data\nsplit = 1\n", "x.toml: not valid TOML: "),
 ])
@@ -94,9 +94,9 @@ def test_the_moved_camera_keys_reach_the_augmentation(tmp_path) -> None:
     text = "[augmentation]\noffset_aug = 0.3\noffset_range = 1.5\noffset_lookahead = 8\n"
     config = load_recipe(str(_recipe(tmp_path, text)))
     augment = config.pipeline().augment
-    assert (augment.offset, augment.offset_range_m, augment.offset_lookahead_m) == (0.3, 1.5, 8.0)
+    assert (augment.offset_aug, augment.offset_range, augment.offset_lookahead) == (0.3, 1.5, 8.0)
     assert recipe_sections(config)["augmentation"]["offset_aug"] == 0.3
-    assert load_recipe(None).pipeline().augment.offset == 0.0  # off unless asked for
+    assert load_recipe(None).pipeline().augment.offset_aug == 0.0  # off unless asked for
 
 
 def test_a_whole_number_serves_where_a_number_is_asked(tmp_path) -> None:

@@ -185,7 +185,7 @@ def test_an_unknown_lane_rule_or_view_source_is_refused() -> None:
 def test_the_edge_pull_acts_beyond_the_margin_each_camera_at_its_own_offset() -> None:
     from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, edge_pull
 
-    spec = AugmentSpec(edge_gain=0.2, edge_margin_m=1.5, side_camera_m=1.0)
+    spec = AugmentSpec(edge_gain=0.2, edge_margin=1.5, side_camera_m=1.0)
     middles = np.array([0.5, 0.5, 0.5, -2.0, 2.0])  # the road's middle from the centre camera, + right
     camera = np.array([CENTER, LEFT, RIGHT, CENTER, CENTER])
     pull = edge_pull(middles, camera, spec)
@@ -232,11 +232,12 @@ def test_rbc_train_keeps_the_road_middles_for_the_edge_pull(tmp_path: Path) -> N
 
 
 def test_the_edge_gain_reaches_the_augmentation_and_a_bad_one_is_refused(tmp_path: Path) -> None:
-    from models.training.train_config import SIDE_CAMERA_OFFSET_M, TrainConfig
+    from models.training.train_config import TrainConfig
+    from protocol.camera import SIDE_OFFSET_M as SIDE_CAMERA_OFFSET_M
 
     config = TrainConfig(data=["d"], out=str(tmp_path), edge_gain=0.2, edge_margin=2.0)
     spec = config.pipeline().augment
-    assert (spec.edge_gain, spec.edge_margin_m, spec.side_camera_m) == (0.2, 2.0, SIDE_CAMERA_OFFSET_M)
+    assert (spec.edge_gain, spec.edge_margin, spec.side_camera_m) == (0.2, 2.0, SIDE_CAMERA_OFFSET_M)
     assert config.data_options().road_middles and not TrainConfig(data=["d"], out="o").data_options().road_middles
     for bad in ({"edge_gain": -0.1}, {"edge_gain": 2.0}, {"edge_margin": -1.0}):
         with pytest.raises(ValueError, match="edge"):

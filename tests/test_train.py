@@ -204,7 +204,7 @@ def test_row_stride_trains_as_a_log_of_every_nth_row(tmp_path: Path) -> None:
     a = exported_weights(strided.run_dir / "checkpoint.pt", "last")
     b = exported_weights(reference.run_dir / "checkpoint.pt", "last")
     assert all(torch.equal(a[k], b[k]) for k in a)
-    with pytest.raises(ValueError, match="row stride"):
+    with pytest.raises(ValueError, match="row_stride must be 1..1000"):
         _config(tmp_path / "bad", row_stride=0)
 
 

@@ -132,7 +132,7 @@ def test_the_gain_is_a_serving_setting_the_network_and_its_validation_figures_ar
     served = DrivePipeline(SteeringModel(result.onnx)).steer(frame)
     network = DrivePipeline(SteeringModel(result.onnx), DriveConfig(gain=1.0)).steer(frame)
     assert served == pytest.approx(max(-1.0, min(1.0, 1.5 * network)), abs=1e-6)
-    with pytest.raises(ValueError, match="steering gain"):
+    with pytest.raises(ValueError, match=r"gain must be 0.1..2, got 0.0"):
         _config(tmp_path / "bad", gain=0.0)
     old = json.loads((plain.run_dir / "config.json").read_text())["config"]
     del old["gain"]

@@ -97,10 +97,10 @@ def test_the_turned_camera_and_reduced_decode_reach_the_pipeline() -> None:
     from models.training.train_config import TrainConfig
 
     paper = TrainConfig(data=["x"], out="y").pipeline()
-    assert paper.augment.yaw == 0.0 and paper.contract.decode_reduce == 0  # off unless asked for: the paper's
+    assert paper.augment.yaw_aug == 0.0 and paper.contract.decode_reduce == 0  # off unless asked for: the paper's
     p = TrainConfig(data=["x"], out="y", yaw_aug=0.5, yaw_gain=2.0, yaw_range=10.0, crop_top=64, crop_bottom=136,
                     decode_reduce=2).pipeline()
-    assert (p.augment.yaw, p.augment.yaw_gain, p.augment.yaw_range_deg) == (0.5, 2.0, 10.0)
+    assert (p.augment.yaw_aug, p.augment.yaw_gain, p.augment.yaw_range) == (0.5, 2.0, 10.0)
     assert p.contract.decode_reduce == 2
     for bad in ({"yaw_aug": 1.5}, {"yaw_range": 0.0}, {"yaw_gain": -1.0}):
         with pytest.raises(ValueError, match="yaw"):

@@ -19,7 +19,7 @@ NONE = dict(perspective=0.0, shadow=0.0, brightness=0.0, flip=0.0, pan=0.0, tilt
 
 
 def test_turned_camera_label_steers_back_and_flip_mirrors_it() -> None:
-    spec = AugmentSpec(**{**NONE, "yaw": 1.0, "yaw_range_deg": 6.0, "yaw_gain": 0.5})
+    spec = AugmentSpec(**{**NONE, "yaw_aug": 1.0, "yaw_range": 6.0, "yaw_gain": 0.5})
     steering = np.full(400, 0.2)
     p = draw_params(steering, np.zeros(400, bool), replace(spec, flip=0.5), np.random.default_rng(1))
     assert p.turned.all() and np.abs(p.yaw_deg).max() <= 6.0 and np.ptp(p.yaw_deg) > 10
@@ -28,7 +28,7 @@ def test_turned_camera_label_steers_back_and_flip_mirrors_it() -> None:
     assert np.allclose(p.steering, expect, atol=1e-6)
     # without it the generator is consumed exactly as before the augmentation existed
     a = draw_params(steering, np.ones(400, bool), AugmentSpec(), np.random.default_rng(2))
-    b = draw_params(steering, np.ones(400, bool), replace(AugmentSpec(), yaw_range_deg=3.0), np.random.default_rng(2))
+    b = draw_params(steering, np.ones(400, bool), replace(AugmentSpec(), yaw_range=3.0), np.random.default_rng(2))
     assert a.yaw is None and np.array_equal(a.steering, b.steering) and np.array_equal(a.pan_xy, b.pan_xy)
 
 
@@ -89,7 +89,7 @@ def test_moved_camera_label_aims_back_and_is_the_side_cameras_at_their_offset() 
     theta = np.radians(25 * 0.3)
     assert augment.offset_label(0.3, 2.0, 8.0) == pytest.approx(math.degrees(math.atan(math.tan(theta) - 0.25)) / 25)
     # through the draws: centre-camera samples only, mirrored by the flip
-    spec = AugmentSpec(**{**NONE, "perspective": 0.5, "flip": 0.5, "offset": 1.0, "offset_range_m": 2.0})
+    spec = AugmentSpec(**{**NONE, "perspective": 0.5, "flip": 0.5, "offset_aug": 1.0, "offset_range": 2.0})
     p = draw_params(np.full(400, 0.2), np.ones(400, bool), spec, np.random.default_rng(1))
     centre = p.camera == augment.CENTER
     assert np.array_equal(p.moved, centre) and np.all(p.offset_m[~centre] == 0) and np.ptp(p.offset_m) > 3.5
@@ -101,10 +101,10 @@ def test_moved_camera_label_aims_back_and_is_the_side_cameras_at_their_offset() 
 
 def test_moved_camera_draws_last_and_only_when_used() -> None:
     steering = np.random.default_rng(0).uniform(-0.5, 0.5, 300)
-    for base in (AugmentSpec(), replace(AugmentSpec(), yaw=0.5)):
+    for base in (AugmentSpec(), replace(AugmentSpec(), yaw_aug=0.5)):
         a = draw_params(steering, np.ones(300, bool), base, np.random.default_rng(2))
-        b = draw_params(steering, np.ones(300, bool), replace(base, offset_range_m=1.0), np.random.default_rng(2))
-        c = draw_params(steering, np.ones(300, bool), replace(base, offset=0.5), np.random.default_rng(2))
+        b = draw_params(steering, np.ones(300, bool), replace(base, offset_range=1.0), np.random.default_rng(2))
+        c = draw_params(steering, np.ones(300, bool), replace(base, offset_aug=0.5), np.random.default_rng(2))
         assert a.offset is None and np.array_equal(a.steering, b.steering)
         assert c.moved.any() and not np.array_equal(a.steering, c.steering)
         for name in ("camera", "shadow_xy", "beta", "flip", "pan_xy", "tilt_deg", "shift_px", "yaw_deg"):
@@ -114,7 +114,7 @@ def test_moved_camera_draws_last_and_only_when_used() -> None:
 
 
 def test_moved_camera_edge_pull_sees_the_moved_camera() -> None:
-    spec = AugmentSpec(**{**NONE, "offset": 1.0, "edge_gain": 0.2, "edge_margin_m": 1.0})
+    spec = AugmentSpec(**{**NONE, "offset_aug": 1.0, "edge_gain": 0.2, "edge_margin": 1.0})
     middles = np.linspace(-3, 3, 200)
     p = draw_params(np.zeros(200), np.zeros(200, bool), spec, np.random.default_rng(3), middles)
     middle = middles - p.offset_m  # moved right by x: the middle lies x further left
@@ -174,7 +174,7 @@ def test_moved_camera_fast_path_is_the_reference() -> None:
     road = _road((-3.5, -1.75, 0.0, 1.75, 3.5), half_width_m=0.3)
     net = frame_to_network_image(road, PAPER_CONTRACT)
     cache = FrameCache(np.broadcast_to(net, (3, 1, *net.shape)).copy(), CAMERAS, PAPER_CONTRACT, np.ones(1, bool), [])
-    spec = AugmentSpec(**{**NONE, "flip": 0.5, "shadow": 0.5, "offset": 1.0, "yaw": 0.5})
+    spec = AugmentSpec(**{**NONE, "flip": 0.5, "shadow": 0.5, "offset_aug": 1.0, "yaw_aug": 0.5})
     p = draw_params(np.zeros(16), np.zeros(16, bool), spec, np.random.default_rng(4))
     p.offset_m[0], p.flip[0], p.shadow[0], p.yaw[0], p.yaw_deg[0] = 0.0, False, False, False, 0.0
     fast = FastAugmenter(cache, spec).images(np.zeros(16, np.int64), p)

@@ -26,7 +26,8 @@ LOOKAHEAD_M = 10.0
 
 @dataclass(frozen=True)
 class AugmentSpec:
-    """Probabilities (Table 5) and ranges of the augmentations. Defaults: simplistic driving."""
+    """Probabilities (Table 5) and ranges of the augmentations. Defaults: simplistic driving. A field named like
+    a training recipe's key is that key (``TrainConfig.pipeline`` sets it by name) and its default is the key's."""
 
     perspective: float = 0.5  # left and right half each
     shadow: float = 0.3
@@ -49,23 +50,23 @@ class AugmentSpec:
     # not in the paper: the car turned by psi ~ U(-range, range) degrees, what its camera would then see (an
     # exact homography for a pitched pinhole; camera of the real simulator) and a label that turns back:
     # theta - gain * psi. The closed loop on real frames needs the heading feedback this teaches (README)
-    yaw: float = 0.0
-    yaw_range_deg: float = 6.0
+    yaw_aug: float = 0.0
+    yaw_range: float = 6.0  # degrees
     yaw_gain: float = 1.0
     # not in the paper: the car moved x ~ U(-range, range) metres to the side (+ right; DAVE-2's "shifts"), what
     # its camera would then see (the closed loop's ground-plane re-projection, protocol.camera.view_homographies:
     # exact on the road, the scenery above the horizon left as it is, the bonnet kept) and a label aiming back at
-    # the driver's line offset_lookahead_m ahead: atan(tan(theta) - x / lookahead), the side cameras' Eq. 4/5 at
+    # the driver's line offset_lookahead ahead: atan(tan(theta) - x / lookahead), the side cameras' Eq. 4/5 at
     # x = +-0.95 m. Centre-camera samples only (a side frame already is a moved one)
-    offset: float = 0.0
-    offset_range_m: float = 2.0
-    offset_lookahead_m: float = LOOKAHEAD_M
-    # not in the paper: a pull towards the road's middle where a camera stands more than edge_margin_m off it,
+    offset_aug: float = 0.0
+    offset_range: float = 2.0  # metres
+    offset_lookahead: float = LOOKAHEAD_M  # metres
+    # not in the paper: a pull towards the road's middle where a camera stands more than edge_margin off it,
     # edge_gain steering per metre beyond the margin, each camera at its own offset (the side cameras
     # side_camera_m to each side); drivers each hold a line of their own within about +-2 m of the middle,
     # so the pull leaves their steering alone and acts where the car nears an edge (0: off)
     edge_gain: float = 0.0
-    edge_margin_m: float = 1.5
+    edge_margin: float = 1.5  # metres
     side_camera_m: float = SIDE_OFFSET_M
     camera_vfov_deg: float = VFOV_DEG  # the real simulator's camera (protocol.camera)
     camera_pitch_deg: float = PITCH_DEG
@@ -154,7 +155,7 @@ def offset_label(steering: np.ndarray | float, offset_m: np.ndarray | float, loo
 
 def edge_pull(middles: np.ndarray, camera: np.ndarray, spec: AugmentSpec,
               offset_m: np.ndarray | None = None) -> np.ndarray:
-    """Steering towards the road's middle for cameras beyond ``spec.edge_margin_m`` from it (+ right).
+    """Steering towards the road's middle for cameras beyond ``spec.edge_margin`` from it (+ right).
 
     ``middles`` is where the middle lies from the centre camera (m, + right; NaN: unknown, no pull); from
     the left camera it lies ``side_camera_m`` further right, from the right one as much further left, from a
@@ -164,7 +165,7 @@ def edge_pull(middles: np.ndarray, camera: np.ndarray, spec: AugmentSpec,
     middle = np.asarray(middles, np.float64) + side
     if offset_m is not None:
         middle = middle - offset_m
-    pull = spec.edge_gain * np.sign(middle) * np.maximum(0.0, np.abs(middle) - spec.edge_margin_m)
+    pull = spec.edge_gain * np.sign(middle) * np.maximum(0.0, np.abs(middle) - spec.edge_margin)
     return np.nan_to_num(pull, nan=0.0)  # NaN: a recording without a road file
 
 
@@ -203,17 +204,17 @@ def draw_params(steering: np.ndarray, has_sides: np.ndarray, spec: AugmentSpec, 
     shift_px = rng.uniform(-spec.shift_range_px, spec.shift_range_px, n)
 
     yaw = yaw_deg = offset = offset_m = None
-    if spec.yaw > 0:  # drawn last and only when used, so runs without it consume the generator as before
-        yaw = rng.random(n) < spec.yaw
-        yaw_deg = np.where(yaw, rng.uniform(-spec.yaw_range_deg, spec.yaw_range_deg, n), 0.0)
-    if spec.offset > 0:  # likewise, after the turn; centre-camera samples only (a side frame is a moved one)
-        offset = (rng.random(n) < spec.offset) & (camera == CENTER)
-        offset_m = np.where(offset, rng.uniform(-spec.offset_range_m, spec.offset_range_m, n), 0.0)
+    if spec.yaw_aug > 0:  # drawn last and only when used, so runs without it consume the generator as before
+        yaw = rng.random(n) < spec.yaw_aug
+        yaw_deg = np.where(yaw, rng.uniform(-spec.yaw_range, spec.yaw_range, n), 0.0)
+    if spec.offset_aug > 0:  # likewise, after the turn; centre-camera samples only (a side frame is a moved one)
+        offset = (rng.random(n) < spec.offset_aug) & (camera == CENTER)
+        offset_m = np.where(offset, rng.uniform(-spec.offset_range, spec.offset_range, n), 0.0)
 
     # the labels, in the order the views are made: camera (moved), edge pull, flip, shift, turn
     label = perspective_label(steering, camera, spec.gamma)
     if offset is not None and offset_m is not None:  # drawn together
-        label = np.where(offset, offset_label(label, offset_m, spec.offset_lookahead_m), label)
+        label = np.where(offset, offset_label(label, offset_m, spec.offset_lookahead), label)
     if spec.edge_gain > 0 and middles is not None:  # before the flip, which mirrors the road too
         label = np.clip(label + edge_pull(middles, camera, spec, offset_m), -1.0, 1.0)
     label = np.where(flip, -label, label) + 0.0  # no -0.0 labels

@@ -1,10 +1,10 @@
 """Training recipes: TOML files that hold every setting of a run that shapes the model, by section.
 
-A recipe's keys are :class:`TrainConfig` fields, and TrainConfig stays the one place of their defaults: this
-module only says which section each key lives in (:data:`SECTIONS`), reads and checks a file (anything wrong is
-one line naming the file and the key), finds the bundled recipes by name, and writes a config back as a recipe
-(``rbc train --print``, the run's record, the recipe beside a model card). Where the data is and how the machine
-runs it stay on the command line.
+A recipe's keys are :class:`TrainConfig`'s knobs, each declared once there (default, section, help, range or
+choices; :mod:`models.training.knobs`): this module reads and checks a file by them (anything wrong is one line
+naming the file and the key), finds the bundled recipes by name, and writes a config back as a recipe (``rbc train
+--print``, the run's record, the recipe beside a model card). Where the data is and how the machine runs it stay on
+the command line.
 """
 
 from __future__ import annotations
@@ -16,89 +16,18 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from drive_server.contract import DECODE_REDUCTIONS
-from models.data.behavior import Approach, Arch
-from models.data.split import SplitKind
-from models.networks.runfiles import MODEL, RunRecord
-from models.training.train_config import BRIGHTNESS_MODES, EXPORTS, REMOVED, RENAMED, RENAMED_IN_RECIPES, TrainConfig
+from models.networks.runfiles import RunRecord
+from models.training import knobs
+from models.training.train_config import REMOVED, RENAMED, RENAMED_IN_RECIPES, TrainConfig
 from protocol.errors import BadValue
-from protocol.facts import BEHAVIORS
 from protocol.runrecords import write_text
-from protocol.units import SpeedUnit
 
-#: Each section of a recipe and its keys (TrainConfig fields), with why one would set the key.
-SECTIONS: dict[str, dict[str, str]] = {
-    "data": {
-        "split": "held-out frames: blocks (stretches of each log), random (the paper's; optimistic at 9-15 Hz), "
-                 "recordings (whole recordings: a new driver)",
-        "val_fraction": "share of the data held out for validation",
-        "block_frames": "frames per held-out block (split blocks; shortened for logs under 5 blocks)",
-        "gap_frames": "training frames dropped on each side of a held-out block, so none is a near-copy of one",
-        "min_speed": "drop rows recorded slower than this (laps start and end creeping; 0 keeps every row)",
-        "min_speed_unit": "unit of min_speed: mph or kmh",
-        "speed_unit": "unit of the log's speed column: mph (stock Udacity simulator) or kmh (the paper's)",
-        "label_smoothing_frames": "fit a centred moving average of the steering over this many frames (keyboard "
-                                  "taps averaged to what the driver meant; validation scores the recorded one). 0: off",
-        "row_stride": "use every Nth row of the logs: neighbouring frames are near-copies, the frame cache shrinks",
-        "balance_recordings": "each recording gives a pass over the data at most the median recording's samples",
-        "centre_gain": "not in the paper: add this much steering per metre that the road's middle lies to the side "
-                       "(every --data folder needs its road file, rbc data road). 0: off",
-    },
-    "augmentation": {
-        "aug_loops": "passes over the training data per epoch, each drawing new augmentations (the paper's chi)",
-        "brightness_mode": "add: the paper's p + beta (grey levels); scale: p * (1 + beta), relative to the frame",
-        "brightness_range": "beta ~ U(-R, R): grey levels for add, a share of the pixel for scale (unset: the "
-                            "mode's and the approach's)",
-        "yaw_aug": "not in the paper: share of samples seen from the car turned, labelled to turn back (the "
-                   "heading feedback a closed loop needs). 0: off",
-        "yaw_range": "largest turn of yaw_aug, degrees",
-        "yaw_gain": "how much of a turn yaw_aug's label steers back at once (1: aim along the road again)",
-        "offset_aug": "not in the paper: share of centre-camera samples seen from the car moved sideways (DAVE-2's "
-                      "shifts; the road re-projected through the ground plane), labelled to aim back. 0: off",
-        "offset_range": "largest sideways move of offset_aug, metres (drawn uniformly in +-range)",
-        "offset_lookahead": "metres ahead on the driver's line that offset_aug's label aims at (10: the side "
-                            "cameras' Eq. 4/5)",
-        "edge_gain": "not in the paper: steering per metre that a camera stands beyond edge_margin from the road's "
-                     "middle, towards it (from road files; a recording without one is not pulled). 0: off",
-        "edge_margin": "metres from the road's middle within which edge_gain pulls nothing",
-    },
-    "network": {
-        "behavior": "simplistic, rigorous or collision: zero-steer balancing, augmentations and epochs (paper "
-                    "Tables 4-6)",
-        "arch": "shallow (the paper's CNN), pilotnet (NVIDIA's), shallow-wide (128x64, twice the filters)",
-        "approach": "ours: the paper's balancing and augmentation; nvidia: crop, YUV, no balancing",
-        "crop_top": "first row of the 320x160 frame the network sees (in the model's contract)",
-        "crop_bottom": "row after the last one the network sees",
-        "decode_reduce": "decode frames at 1/N size in training and drive_server alike; 0: the largest that keeps "
-                         "the network's resolution",
-    },
-    "training": {
-        "epochs": "passes of aug_loops x the training data (unset: the behavior's, the paper's Table 6)",
-        "batch_size": "samples per step",
-        "learning_rate": "Adam's step size",
-        "seed": "split, balancing, augmentation and initialisation: the same seed and data give the same weights",
-        "export": f"which epoch becomes {MODEL}: best (lowest validation MSE) or last",
-        "max_steps_per_epoch": "cap on steps per epoch, for quick runs; 0: none",
-    },
-    "export": {
-        "mirror_average": "not in the paper: the model answers (f(x) - f(mirror x)) / 2, its left-right noise "
-                          "cancelled (not for a behavior that keeps to one lane); training is unchanged",
-        "gain": "not in the paper, written into the model: drive_server multiplies the network's steering by this, "
-                "0.1..2, unless its --gain says otherwise (above 1: the closed loop steers harder than the drivers' "
-                "average); training, the network and its open-loop figures are unchanged",
-        "smoothing": "written into the model: drive_server smooths each client's steering with this weight of "
-                     "the new output, 0 < w <= 1 (1: off) unless its --smooth says otherwise",
-    },
-}
+#: Each section of a recipe and its keys (TrainConfig's knobs), with why one would set the key and what it takes.
+SECTIONS: dict[str, dict[str, str]] = knobs.sections(TrainConfig)
 #: TrainConfig fields no recipe holds: where the data is and how this machine runs it (the command line's).
-NOT_IN_RECIPES = ("data", "out", "val_data", "threads", "decode_workers", "progress")
+NOT_IN_RECIPES = knobs.not_knobs(TrainConfig)
 #: Keys whose value is one of a few words or numbers.
-CHOICES: dict[str, tuple[str | int, ...]] = {
-    "split": tuple(k.value for k in SplitKind), "min_speed_unit": tuple(u.value for u in SpeedUnit),
-    "speed_unit": tuple(u.value for u in SpeedUnit), "brightness_mode": BRIGHTNESS_MODES, "behavior": BEHAVIORS,
-    "arch": tuple(a.value for a in Arch), "approach": tuple(a.value for a in Approach),
-    "decode_reduce": DECODE_REDUCTIONS, "export": EXPORTS,
-}
+CHOICES: dict[str, tuple[str | int, ...]] = knobs.choices(TrainConfig)
 #: Where the bundled recipes are, searched in this order: general ones, then each bundled model's own.
 RECIPE_DIRS = (Path(__file__).resolve().parents[1] / "recipes", Path(__file__).resolve().parents[1] / "pretrained")
 

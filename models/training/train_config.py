@@ -8,23 +8,30 @@ from typing import Any
 
 import numpy as np
 
-from drive_server.contract import ContractError, PreprocessContract
-from drive_server.serving import check_gain
+from drive_server.contract import DECODE_REDUCTIONS, ContractError, PreprocessContract
+from drive_server.serving import GAIN_RANGE, NO_GAIN
+from drive_server.smoothing import OFF as SMOOTHING_OFF
 from models.augmentation import geometry
-from models.augmentation.augment import LOOKAHEAD_M, AugmentSpec
+from models.augmentation.augment import AugmentSpec
 from models.data.behavior import (
     AUGMENTATION_LOOPS,
     BATCH_SIZE,
     LEARNING_RATE,
+    Approach,
+    Arch,
+    Behavior,
     Pipeline,
     keeps_lane,
     pipeline_for,
 )
 from models.data.split import SplitKind, SplitSpec
 from models.data.trainingdata import DataOptions
-from protocol.camera import SIDE_OFFSET_M as SIDE_CAMERA_OFFSET_M  # Eq. 4/5's numerator
+from models.networks.runfiles import MODEL
+from models.training.knobs import Range, knob, knob_fields
+from models.training.knobs import check as check_knobs
 from protocol.errors import BadValue
-from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
+from protocol.facts import BEHAVIORS, FRAME_HEIGHT, FRAME_WIDTH
+from protocol.units import SpeedUnit
 
 #: Brightness range of ``brightness_mode="scale"`` when none is given: gain 1 +- 0.5.
 SCALE_BRIGHTNESS_RANGE = 0.5
@@ -40,10 +47,11 @@ RENAMED_IN_RECIPES = {"serve_smoothing": "smoothing", "output_scale": "gain"}
 REMOVED = {"label_lag": 0, "recovery_distance": None}
 EXPORTS = ("best", "last")
 BRIGHTNESS_MODES = ("add", "scale")
+SPEED_UNITS = tuple(u.value for u in SpeedUnit)
 
 
 def turned_edge_columns(augment: AugmentSpec, contract: PreprocessContract) -> int:
-    """Network columns that a turn of up to ``yaw_range_deg`` leaves without picture, plus one: blanked on both
+    """Network columns that a turn of up to ``yaw_range`` degrees leaves without picture, plus one: blanked on both
     sides of every input, so the network cannot read the turn from the missing edge (the closed loop's views
     have that edge too, so a model that did would score there what it could not do in Unity). The camera's
     wide angle makes the edges move most: a 6 degree turn leaves 30 of 320 columns at the edge empty."""
@@ -51,7 +59,7 @@ def turned_edge_columns(augment: AugmentSpec, contract: PreprocessContract) -> i
     xs = np.arange(0.0, FRAME_WIDTH / 2 + 1)
     worst = 0.0
     for sign in (-1.0, 1.0):
-        pull = geometry.yaw_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, np.radians([sign * augment.yaw_range_deg]),
+        pull = geometry.yaw_pullbacks(FRAME_WIDTH, FRAME_HEIGHT, np.radians([sign * augment.yaw_range]),
                                       augment.camera_vfov_deg, augment.camera_pitch_deg)[0]
         for x in (xs, FRAME_WIDTH - xs):  # inward from the left edge, and from the right one
             gx, gy = np.meshgrid(x, ys)
@@ -65,105 +73,111 @@ def turned_edge_columns(augment: AugmentSpec, contract: PreprocessContract) -> i
 
 @dataclass
 class TrainConfig:
-    """Everything that determines a run. ``None`` means the paper's (or the approach's) value."""
+    """Everything that determines a run. ``None`` means the paper's (or the approach's) value.
+
+    Each recipe key is a field made by :func:`~models.training.knobs.knob`, its one declaration: default, section,
+    help, range or choices. A key named like a field of the preprocessing contract or the augmentation sets that
+    field (:meth:`pipeline`) and takes its default from there; the fields after the knobs are the command line's."""
 
     data: list[str]
     out: str
-    behavior: str = "simplistic"
-    arch: str = "shallow"
-    approach: str = "ours"
-    epochs: int | None = None
-    aug_loops: int = AUGMENTATION_LOOPS
-    batch_size: int = BATCH_SIZE
-    learning_rate: float = LEARNING_RATE
-    seed: int = 0
-    max_steps_per_epoch: int | None = None
-    val_fraction: float = SplitSpec.val_fraction
-    split: str = SplitKind.BLOCKS.value  # "blocks": contiguous stretches held out; "random": the paper's
-    block_frames: int = SplitSpec.block_frames
-    gap_frames: int = SplitSpec.gap_frames
-    export: str = "best"  # "best": the epoch with the lowest validation MSE; "last": the final epoch
-    crop_top: int | None = None  # rows of the 320x160 frame; None: the approach's (0 ours, 60 nvidia)
-    crop_bottom: int | None = None
-    decode_reduce: int = 0  # decode frames at 1/n size (0: the serving rule's choice; in the model's contract)
-    brightness_mode: str = "add"  # "add": the paper's p + beta; "scale": p * (1 + beta), relative to the frame
-    brightness_range: float | None = None  # None: 100 (add, the paper's), 50 (nvidia), 0.5 (scale)
-    min_speed: float = 0.0  # rows recorded slower than this are dropped (0: keep all)
-    min_speed_unit: str = "mph"
-    speed_unit: str = "mph"  # unit of the log's speed column: mph (Udacity) or kmh (the paper's simulator)
-    label_smoothing_frames: int = 0  # train on a centred moving average of the steering over N frames (0: off)
-    row_stride: int = 1  # train and validate on every Nth row of the logs (1: every row)
+    split: str = knob(SplitKind.BLOCKS.value, "data", "held-out frames: blocks (stretches of each log), random (the "
+                      "paper's; optimistic at 9-15 Hz), recordings (whole recordings: a new driver)",
+                      choices=tuple(k.value for k in SplitKind))
+    val_fraction: float = knob(SplitSpec.val_fraction, "data", "share of the data held out for validation")
+    block_frames: int = knob(SplitSpec.block_frames, "data", "frames per held-out block (split blocks; shortened "
+                             "for logs under 5 blocks)")
+    gap_frames: int = knob(SplitSpec.gap_frames, "data", "training frames dropped on each side of a held-out "
+                           "block, so none is a near-copy of one")
+    min_speed: float = knob(DataOptions.min_speed, "data", "drop rows recorded slower than this (laps start and end "
+                            "creeping; 0 keeps every row)", range=Range(0.0))
+    min_speed_unit: str = knob(SpeedUnit.MPH.value, "data", "unit of min_speed: mph or kmh", choices=SPEED_UNITS)
+    speed_unit: str = knob(SpeedUnit.MPH.value, "data", "unit of the log's speed column: mph (stock Udacity "
+                           "simulator) or kmh (the paper's)", choices=SPEED_UNITS)
+    label_smoothing_frames: int = knob(DataOptions.label_smoothing_frames, "data", "fit a centred moving average of "
+                                       "the steering over this many frames (keyboard taps averaged to what the driver "
+                                       "meant; validation scores the recorded one). 0: off",
+                                       range=Range(0, 1000, unit="frames"))
+    row_stride: int = knob(DataOptions.row_stride, "data", "use every Nth row of the logs: neighbouring frames are "
+                           "near-copies, the frame cache shrinks", range=Range(1, 1000))
+    balance_recordings: bool = knob(False, "data", "each recording gives a pass over the data at most the median "
+                                    "recording's samples")
+    centre_gain: float = knob(DataOptions.centre_gain, "data", "not in the paper: add this much steering per metre "
+                              "that the road's middle lies to the side (every --data folder needs its road file, rbc "
+                              "data road). 0: off", range=Range(0.0, 1.0, unit="steering per metre"))
+    aug_loops: int = knob(AUGMENTATION_LOOPS, "augmentation", "passes over the training data per epoch, each "
+                          "drawing new augmentations (the paper's chi)")
+    brightness_mode: str = knob(AugmentSpec.brightness_mode, "augmentation", "add: the paper's p + beta (grey "
+                                "levels); scale: p * (1 + beta), relative to the frame", choices=BRIGHTNESS_MODES)
+    brightness_range: float | None = knob(None, "augmentation", "beta ~ U(-R, R): grey levels for add, a share of "
+                                          "the pixel for scale (unset: the mode's and the approach's)",
+                                          range=Range(0.0))
+    yaw_aug: float = knob(AugmentSpec.yaw_aug, "augmentation", "not in the paper: share of samples seen from the car "
+                          "turned, labelled to turn back (the heading feedback a closed loop needs). 0: off",
+                          range=Range(0.0, 1.0))
+    yaw_range: float = knob(AugmentSpec.yaw_range, "augmentation", "largest turn of yaw_aug",
+                            range=Range(0.0, 30.0, low_open=True, unit="degrees"))
+    yaw_gain: float = knob(AugmentSpec.yaw_gain, "augmentation", "how much of a turn yaw_aug's label steers back at "
+                           "once (1: aim along the road again)", range=Range(0.0, 5.0))
+    offset_aug: float = knob(AugmentSpec.offset_aug, "augmentation", "not in the paper: share of centre-camera "
+                             "samples seen from the car moved sideways (DAVE-2's shifts; the road re-projected through "
+                             "the ground plane), labelled to aim back. 0: off", range=Range(0.0, 1.0))
+    offset_range: float = knob(AugmentSpec.offset_range, "augmentation", "largest sideways move of offset_aug "
+                               "(drawn uniformly in +-range)", range=Range(0.0, 4.0, low_open=True, unit="m"))
+    offset_lookahead: float = knob(AugmentSpec.offset_lookahead, "augmentation", "metres ahead on the driver's line "
+                                   "that offset_aug's label aims at (10: the side cameras' Eq. 4/5)",
+                                   range=Range(1.0, 100.0, unit="m"))
+    edge_gain: float = knob(AugmentSpec.edge_gain, "augmentation", "not in the paper: steering per metre that a "
+                            "camera stands beyond edge_margin from the road's middle, towards it (from road files; a "
+                            "recording without one is not pulled). 0: off",
+                            range=Range(0.0, 1.0, unit="steering per metre"))
+    edge_margin: float = knob(AugmentSpec.edge_margin, "augmentation", "metres from the road's middle within which "
+                              "edge_gain pulls nothing", range=Range(0.0, 10.0, unit="m"))
+    behavior: str = knob(Behavior.SIMPLISTIC.value, "network", "simplistic, rigorous or collision: zero-steer "
+                         "balancing, augmentations and epochs (paper Tables 4-6)", choices=BEHAVIORS)
+    arch: str = knob(Arch.SHALLOW.value, "network", "shallow (the paper's CNN), pilotnet (NVIDIA's), shallow-wide "
+                     "(128x64, twice the filters)", choices=tuple(a.value for a in Arch))
+    approach: str = knob(Approach.OURS.value, "network", "ours: the paper's balancing and augmentation; nvidia: crop, "
+                         "YUV, no balancing", choices=tuple(a.value for a in Approach))
+    crop_top: int | None = knob(None, "network", "first row of the 320x160 frame the network sees (in the model's "
+                                "contract; unset: the approach's)")
+    crop_bottom: int | None = knob(None, "network", "row after the last one the network sees (unset: the approach's)")
+    decode_reduce: int = knob(0, "network", "decode frames at 1/N size in training and drive_server alike; 0: the "
+                              "largest that keeps the network's resolution", choices=DECODE_REDUCTIONS)
+    epochs: int | None = knob(None, "training", "passes of aug_loops x the training data (unset: the behavior's, the "
+                              "paper's Table 6)")
+    batch_size: int = knob(BATCH_SIZE, "training", "samples per step")
+    learning_rate: float = knob(LEARNING_RATE, "training", "Adam's step size")
+    seed: int = knob(0, "training", "split, balancing, augmentation and initialisation: the same seed and data give "
+                     "the same weights")
+    export: str = knob("best", "training", f"which epoch becomes {MODEL}: best (lowest validation MSE) or last",
+                       choices=EXPORTS)
+    max_steps_per_epoch: int | None = knob(None, "training", "cap on steps per epoch, for quick runs; 0: none")
+    mirror_average: bool = knob(False, "export", "not in the paper: the model answers (f(x) - f(mirror x)) / 2, its "
+                                "left-right noise cancelled (not for a behavior that keeps to one lane); training is "
+                                "unchanged")
+    gain: float = knob(NO_GAIN, "export", "not in the paper, written into the model: drive_server multiplies the "
+                       "network's steering by this unless its --gain says otherwise (above 1: the closed loop steers "
+                       "harder than the drivers' average); training, the network and its open-loop figures are "
+                       "unchanged", range=Range(*GAIN_RANGE))
+    smoothing: float = knob(SMOOTHING_OFF, "export", "written into the model: drive_server smooths each client's "
+                            "steering with this weight of the new output (1: off) unless its --smooth says otherwise",
+                            range=Range(0.0, SMOOTHING_OFF, low_open=True))
+    # the command line's, in no recipe: where the data is, and how this machine runs it (threads, decode_workers and
+    # progress change no result beyond float noise)
     val_data: list[str] = field(default_factory=list)  # recordings held out whole (implies split "recordings")
-    balance_recordings: bool = False  # each recording gives a pass at most the median recording's samples
-    # not in the paper: labels plus this much steering per metre towards the road's middle (rbc data road)
-    centre_gain: float = 0.0
-    # not in the paper: edge_gain steering per metre that a camera (each at its own offset) stands beyond
-    # edge_margin metres from the road's middle, towards it (rbc data road; 0: off)
-    edge_gain: float = 0.0
-    edge_margin: float = 1.5
-    # not in the paper: the share of samples seen from the car turned by up to yaw_range degrees, labelled to
-    # turn back (theta - yaw_gain * psi): the heading feedback a closed loop needs (0: off, the paper's)
-    yaw_aug: float = 0.0
-    yaw_range: float = 6.0
-    yaw_gain: float = 1.0
-    # not in the paper: the share of (centre-camera) samples seen from the car moved up to offset_range metres to the
-    # side (DAVE-2's shifts), labelled to aim back at the driver's line offset_lookahead metres ahead (0: off)
-    offset_aug: float = 0.0
-    offset_range: float = 2.0
-    offset_lookahead: float = LOOKAHEAD_M
-    # not in the paper: export (f(x) - f(mirror x)) / 2 (models.networks.nets.MirrorAveraged); training is unchanged
-    mirror_average: bool = False
-    # not in the paper: drive_server multiplies the network's steering by this unless told otherwise
-    # (drive_server.serving; 1: as trained), written into the model's metadata; training and the network unchanged
-    gain: float = 1.0
-    # how drive_server smooths each client's steering unless told otherwise: the weight of the new output
-    # (drive_server.smoothing; 1: off), written into the model's metadata
-    smoothing: float = 1.0
-    # execution only (do not change results beyond float noise)
     threads: int | None = None
     decode_workers: int | None = None
     progress: bool = True
 
     def __post_init__(self) -> None:
-        if self.export not in EXPORTS:
-            raise BadValue(f"export must be best or last, not {self.export!r}")
-        if self.brightness_mode not in BRIGHTNESS_MODES:
-            raise BadValue(f"brightness mode must be add or scale, not {self.brightness_mode!r}")
         if self.val_data:
             self.split = "recordings"
-        if not 0.0 <= self.yaw_aug <= 1.0:
-            raise BadValue(f"yaw augmentation share must be 0..1, got {self.yaw_aug}")
-        if not 0.0 < self.yaw_range <= 30.0:
-            raise BadValue(f"yaw range must be above 0 and at most 30 degrees, got {self.yaw_range}")
-        if not 0.0 <= self.yaw_gain <= 5.0:
-            raise BadValue(f"yaw gain must be 0..5, got {self.yaw_gain}")
-        if not 0.0 <= self.offset_aug <= 1.0:
-            raise BadValue(f"offset augmentation share must be 0..1, got {self.offset_aug}")
-        if not 0.0 < self.offset_range <= 4.0:
-            raise BadValue(f"offset range must be above 0 and at most 4 m, got {self.offset_range}")
-        if not 1.0 <= self.offset_lookahead <= 100.0:
-            raise BadValue(f"offset lookahead must be 1..100 m, got {self.offset_lookahead}")
+        check_knobs(self)
         if self.mirror_average and keeps_lane(self.behavior):
             raise BadValue(f"mirror_average: the {self.behavior} behavior keeps to one lane of a two-lane road, a "
                            f"left-right asymmetric task (trained without flips); the average would steer it to the "
                            f"road's middle")
-        check_gain(self.gain)
-        if not 0.0 < self.smoothing <= 1.0:
-            raise BadValue(f"smoothing must be above 0 and at most 1 (1: off), got {self.smoothing}")
-        if not 0.0 <= self.centre_gain <= 1.0:
-            raise BadValue(f"centre gain must be 0..1 steering per metre, got {self.centre_gain}")
-        if not 0.0 <= self.edge_gain <= 1.0:
-            raise BadValue(f"edge gain must be 0..1 steering per metre, got {self.edge_gain}")
-        if not 0.0 <= self.edge_margin <= 10.0:
-            raise BadValue(f"edge margin must be 0..10 m, got {self.edge_margin}")
-        if not 0 <= self.label_smoothing_frames <= 1000:
-            raise BadValue(f"label smoothing must be 0..1000 frames, got {self.label_smoothing_frames}")
-        if not 1 <= self.row_stride <= 1000:
-            raise BadValue(f"row stride must be 1..1000, got {self.row_stride}")
-        if self.min_speed < 0:
-            raise BadValue(f"min speed must be >= 0, got {self.min_speed}")
-        if self.brightness_range is not None and self.brightness_range < 0:
-            raise BadValue(f"brightness range must be >= 0, got {self.brightness_range}")
         self.split_spec()  # validates the split settings
         try:
             self.pipeline()
@@ -200,22 +214,26 @@ class TrainConfig:
                            **{name: getattr(self, name) for name in same})
 
     def pipeline(self) -> Pipeline:
-        """The behavior's pipeline with this run's crop and brightness settings applied."""
+        """The behavior's pipeline with this run's knobs: each named like a field of the preprocessing contract or
+        the augmentation sets it (None: the pipeline's own). Built once for each setting of the knobs."""
+        key = tuple(getattr(self, f.name) for f in knob_fields(self))
+        if self.__dict__.get("_pipeline_key") != key:
+            self.__dict__["_pipeline"], self.__dict__["_pipeline_key"] = self._build_pipeline(), key
+        built: Pipeline = self.__dict__["_pipeline"]
+        return built
+
+    def _build_pipeline(self) -> Pipeline:
         p = pipeline_for(self.behavior, self.arch, self.approach)
-        contract = replace(p.contract, crop_top=p.contract.crop_top if self.crop_top is None else self.crop_top,
-                           crop_bottom=p.contract.crop_bottom if self.crop_bottom is None else self.crop_bottom,
-                           decode_reduce=self.decode_reduce)
-        brightness_range = self.brightness_range
-        if brightness_range is None:
-            brightness_range = SCALE_BRIGHTNESS_RANGE if self.brightness_mode == "scale" else p.augment.brightness_range
-        augment = replace(p.augment, brightness_mode=self.brightness_mode, brightness_range=brightness_range)
+        contract = replace(p.contract, **self._named_like(p.contract))
+        augment = replace(p.augment, **self._named_like(p.augment))
+        if self.brightness_range is None and self.brightness_mode == "scale":
+            augment = replace(augment, brightness_range=SCALE_BRIGHTNESS_RANGE)
         if self.yaw_aug > 0:
-            augment = replace(augment, yaw=self.yaw_aug, yaw_range_deg=self.yaw_range, yaw_gain=self.yaw_gain)
             contract = replace(contract, blank_columns=turned_edge_columns(augment, contract))
-        if self.offset_aug > 0:
-            augment = replace(augment, offset=self.offset_aug, offset_range_m=self.offset_range,
-                              offset_lookahead_m=self.offset_lookahead)
-        if self.edge_gain > 0:
-            augment = replace(augment, edge_gain=self.edge_gain, edge_margin_m=self.edge_margin,
-                              side_camera_m=SIDE_CAMERA_OFFSET_M)
         return replace(p, contract=contract, augment=augment)
+
+    def _named_like(self, target: Any) -> dict[str, Any]:
+        """The knobs named like a field of ``target`` that are set (not None), by name."""
+        names = {f.name for f in fields(target)}
+        return {f.name: getattr(self, f.name) for f in knob_fields(self)
+                if f.name in names and getattr(self, f.name) is not None}

@@ -8,11 +8,16 @@ import time
 from tools.arguments import add_moved_to_recipe_flags
 from tools.errors import CommandError
 
+#: The recipe keys the command line may override (``--max-steps-per-epoch`` for ``max_steps_per_epoch``).
+OVERRIDES = ("epochs", "seed", "max_steps_per_epoch")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from models.training.recipe import SECTION_OF, SECTIONS
+
     parser.add_argument("--recipe", metavar="FILE_OR_NAME",
-                        help="what to train: a recipe file (TOML: [data], [augmentation], [network], [training], "
-                             "[export]) or a bundled recipe's name: laps (your own Unity laps), or a bundled model's "
+                        help=f"what to train: a recipe file (TOML: {', '.join(f'[{s}]' for s in SECTIONS)}) or a "
+                             "bundled recipe's name: laps (your own Unity laps), or a bundled model's "
                              "own (unity, simplistic, rigorous, collision, generalist, ...). Default: no recipe, the "
                              "paper's simplistic behavior with the shallow CNN, blocks split, best epoch exported; "
                              "--print shows any recipe in full")
@@ -23,11 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "e.g. one fold of other drivers' recordings (rbc data fold)")
     parser.add_argument("--out", metavar="RUN_DIR",
                         help="run directory (config, history, model); needed unless --print")
-    parser.add_argument("--epochs", type=int, help="instead of the recipe's [training] epochs")
-    parser.add_argument("--seed", type=int, help="instead of the recipe's [training] seed (split, balancing, "
-                        "augmentation and initialisation)")
-    parser.add_argument("--max-steps-per-epoch", type=int, metavar="N",
-                        help="instead of the recipe's [training] max_steps_per_epoch: cap steps per epoch (quick runs)")
+    for key in OVERRIDES:
+        parser.add_argument(f"--{key.replace('_', '-')}", type=int, metavar="N",
+                            help=f"instead of the recipe's [{SECTION_OF[key]}] {key}: {SECTIONS[SECTION_OF[key]][key]}")
     parser.add_argument("--threads", type=int,
                         help="PyTorch threads (default: cores - 1 for the shallow CNN, whose batches need a core of "
                              "their own; every core for PilotNet)")
@@ -38,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "exit without training")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_moved_to_recipe_flags(parser)
+    parser.epilog = ("recipe keys, by section (rbc train --recipe NAME --print writes each with what it is for and "
+                     "the values it takes): " + "; ".join(f"[{section}] {', '.join(keys)}"
+                                                         for section, keys in SECTIONS.items()))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,8 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from models.training.recipe import load_recipe, recipe_toml
     from models.training.train import train
 
-    overrides = {key: value for key, value in (("epochs", args.epochs), ("seed", args.seed),
-                                               ("max_steps_per_epoch", args.max_steps_per_epoch)) if value is not None}
+    overrides = {key: getattr(args, key) for key in OVERRIDES if getattr(args, key) is not None}
     if args.print_recipe:
         print(recipe_toml(load_recipe(args.recipe, **overrides), args.recipe), end="")
         return 0
