@@ -11,7 +11,7 @@ from pathlib import Path
 
 from drive_server.model import SteeringModel
 from protocol.runrecords import code_version, file_sha256, write_text
-from tools.arguments import add_camera_argument, add_vehicle_argument
+from tools.arguments import add_camera_argument, add_monitor_argument, add_vehicle_argument
 from tools.console import RunProgress
 from tools.errors import CommandError
 from tools.evaluate.cluster import BACKENDS, make_runner
@@ -69,6 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="km/h for every experiment but the speed one (default %(default)s)")
     add_vehicle_argument(p, d.vehicle)
     add_camera_argument(p, None)
+    add_monitor_argument(p, "every run (in-process, as rbc sim --monitor; its figures in each run and row)")
     p.add_argument("--out", type=Path, required=True, help=f"output folder ({RESULTS}, table9.md, plots)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished runs journaled in --out by an earlier, interrupted evaluation "
@@ -97,6 +98,40 @@ def _worlds(args: argparse.Namespace, out: Path) -> dict:
     return meta
 
 
+def _monitor(args: argparse.Namespace, steering: SteeringModel, model: Path) -> dict | None:
+    """What results.json says of the monitor every run drives with (None: --monitor off); one line if there is none
+    to drive with."""
+    if args.monitor == "off":
+        return None
+    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from tools.evaluate.monitor import monitor_meta
+
+    found = steering.monitor()
+    if found is None:
+        raise CommandError(f"--monitor {args.monitor}: {model.name} carries no misbehaviour monitor",
+                           "attach one with rbc monitor fit, or drop --monitor")
+    return monitor_meta(found[0], MonitorPolicy(mode=MonitorMode(args.monitor)))
+
+
+def _print_monitored(summary: dict, monitor: dict) -> None:
+    """The printed table with the monitor's columns: each row's episodes, time in warning and alarm, take-overs
+    foreseen at least a second ahead and the median lead of the first warning."""
+    from tools.evaluate.monitor import MONITOR_HEADS, MONITOR_LEGEND, monitor_cells
+
+    rows = [(exp.title, format_cell(summary[exp.key]), *monitor_cells(summary[exp.key].get("monitor")))
+            for exp in EXPERIMENTS if exp.key in summary]
+    heads = ("experiment", "result", *MONITOR_HEADS)
+    widths = [max(len(r[k]) for r in [heads, *rows]) for k in range(len(heads))]
+    print(f"monitor {monitor['score']} ({monitor['mode']}): warning at {monitor['warn']:.4g}, "
+          f"alarm at {monitor['alarm']:.4g}")
+    for row in [heads, *rows]:
+        print("  " + "  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip())
+    print(MONITOR_LEGEND)
+    failed = sum(summary[key].get("monitor", {}).get("failed", 0) for key in summary)
+    if failed:
+        print(f"the monitor failed and was switched off in {failed} run(s) (runs[].monitor.failed in {RESULTS})")
+
+
 def run(args: argparse.Namespace) -> int:
     model = _model_path(args)
     if not model.is_file():
@@ -106,6 +141,9 @@ def run(args: argparse.Namespace) -> int:
                                                or args.worlds != DEFAULT_UNSEEN_WORLDS):
         raise CommandError("--worlds, --world-seed and --world-config belong to the unseen_worlds experiment",
                            "add --experiments unseen_worlds (or all)")
+    if args.server and args.monitor != "off":
+        raise CommandError(f"--monitor {args.monitor} drives the model's monitor in-process; a drive server runs "
+                           "its own", "start drive_server with --monitor, or drop --server")
     if args.server and "speed_limit" in experiments:
         log.warning("--server: skipping the speed-limit experiment (the speed limit belongs to the server)")
         experiments = tuple(e for e in experiments if e != "speed_limit")
@@ -115,12 +153,11 @@ def run(args: argparse.Namespace) -> int:
 
         args.track = resolve_track_name(args.track)  # world:SEED -> its file
     get_track(args.track or SETUPS[args.behavior].track)
-    if not args.server:
-        SteeringModel(model)
+    monitor_meta = None if args.server else _monitor(args, SteeringModel(model), model)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     worlds_meta = _worlds(args, out) if "unseen_worlds" in experiments else None
-    spec = DriverSpec(model=None if args.server else str(model), server=args.server)
+    spec = DriverSpec(model=None if args.server else str(model), server=args.server, monitor=args.monitor)
     model_sha = file_sha256(model)
     journal = out / "runs.jsonl"
     track_file = Path(args.track) if args.track and Path(args.track).is_file() else None  # a name: in the code
@@ -139,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
             "suite": {k: v for k, v in vars(cfg).items()}, "started": datetime.now(UTC).isoformat()}
     if worlds_meta:
         meta["worlds"] = worlds_meta
+    if monitor_meta:
+        meta["monitor"] = monitor_meta
 
     bar = RunProgress(max_runs(cfg))
     runner = make_runner(args.backend, spec, args.workers, journal, on_result=bar.record, reuse=reuse,
@@ -160,6 +199,10 @@ def run(args: argparse.Namespace) -> int:
         runner.close(cancel=interrupted)
         bar.close(finished=not interrupted)
     wall = time.perf_counter() - started
+    if monitor_meta:
+        from tools.evaluate.monitor import add_monitor_rows
+
+        add_monitor_rows(summary, runner.records)
     meta.update(wall_time_s=round(wall, 1), interrupted=interrupted, runs=len(runner.records),
                 resumed_runs=runner.reused, retried=runner.retried)
     written = EvalRecord(out, meta, summary, runner.records).write()
@@ -173,9 +216,12 @@ def run(args: argparse.Namespace) -> int:
     retried = f", {len(runner.retried)} failed attempts retried ({RESULTS} meta.retried)" if runner.retried else ""
     print(f"\nRobustness of {model.name} ({args.behavior}), {len(runner.records)} runs{resumed}, "
           f"{runner.workers} workers ({args.backend}){retried}, wall {wall:.0f} s")
-    width = max(len(e.title) for e in EXPERIMENTS)
-    for exp in EXPERIMENTS:
-        if exp.key in summary:
-            print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
+    if monitor_meta:
+        _print_monitored(summary, monitor_meta)
+    else:
+        width = max(len(e.title) for e in EXPERIMENTS)
+        for exp in EXPERIMENTS:
+            if exp.key in summary:
+                print(f"  {exp.title:<{width}}  {format_cell(summary[exp.key])}")
     print(f"\nwrote {written}, {out / 'table9.md'}" + (f", {len(plots)} plots" if plots else ""))
     return 0

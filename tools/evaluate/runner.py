@@ -36,6 +36,7 @@ class DriverSpec:
     server: str | None = None
     threads: int = 1
     law: ControlLaw = ControlLaw()  # Eq. 14 of an in-process model; its speed limit is each scenario's
+    monitor: str = "off"  # the in-process model's misbehaviour monitor: off, warn or act (drive_server --monitor)
 
     def __post_init__(self) -> None:
         if self.model is None and self.server is None:
@@ -69,8 +70,11 @@ def _driver(spec: DriverSpec, speed_limit_kmh: float):
         if spec.server:
             _DRIVERS[key] = SocketDriver(spec.server)
         elif spec.model:
+            from drive_server.monitor import MonitorMode, MonitorPolicy
+
             law = replace(spec.law, speed_limit_kmh=speed_limit_kmh)  # the scenario's speed limit
-            _DRIVERS[key] = OnnxDriver(spec.model, law=law, threads=spec.threads)
+            _DRIVERS[key] = OnnxDriver(spec.model, law=law, threads=spec.threads,
+                                       monitor=MonitorPolicy(mode=MonitorMode(spec.monitor)))
         else:
             raise ValueError("give a model (in-process) or a server URL")
     return _DRIVERS[key]
@@ -82,6 +86,7 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
 
     cv2.setNumThreads(1)
     from tools.evaluate.experiments import is_autonomous
+    from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.scenario import ScenarioConfig
     from tools.sim.driving.session import run_scenario
     from tools.sim.track.files import write_track_file
@@ -90,10 +95,15 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
         write_track_file(task.scenario["track"], task.track_doc)  # a worker on a node without the file
     config = ScenarioConfig(**task.scenario)
     started = time.perf_counter()
-    result = run_scenario(config, _driver(spec, config.speed_limit_kmh))
+    driver = _driver(spec, config.speed_limit_kmh)
+    result = run_scenario(config, driver)
     record = {"experiment": task.experiment, "behavior": task.behavior, "value": task.value, "seed": task.seed,
               "wall_time_s": round(time.perf_counter() - started, 3), **result.to_dict(), "scenario": task.scenario}
     record["autonomous"] = is_autonomous(record)
+    if isinstance(driver, OnnxDriver) and driver.monitor is not None:  # --monitor warn|act, a model carrying one
+        from tools.evaluate.monitor import run_monitor
+
+        record["monitor"] = run_monitor(driver, result)
     if task.map_dir and not record["autonomous"]:
         from tools.sim.pictures.viz import write_trajectory_map
 

@@ -93,6 +93,19 @@ def first_warning_leads(run: RunTrace, rules: ScoringRules) -> list[tuple[float,
     return out
 
 
+#: A take-over is foreseen "in time" when the first warning came at least this long before it (drive-log, eval).
+IN_TIME_S = 1.0
+
+
+def foresight(run: RunTrace, rules: ScoringRules) -> dict[str, Any]:
+    """Which of a run's misbehaviours the monitor foresaw, and how early (:func:`first_warning_leads`): the counts
+    and leads that ``rbc drive-log`` and ``rbc eval --monitor`` record for a run."""
+    leads = [lead for *_, lead in first_warning_leads(run, rules)]
+    return {"takeovers_scored": len(leads), "foreseen": sum(x is not None for x in leads),
+            "foreseen_1s": sum(x is not None and x >= IN_TIME_S for x in leads),
+            "leads_s": [None if x is None else round(x, 2) for x in leads]}
+
+
 def _slice_hit(run: RunTrace, when: float, k: int, history: float, rules: ScoringRules) -> bool | None:
     lo, hi = when - k - 1, when - k
     if lo < history:
