@@ -19,12 +19,11 @@ import torch
 from torch import nn
 
 from drive_server.contract import PreprocessContract
+from models.monitoring.training import channels_last, fit_batches, input_resize, network_input, seeded
 
 log = logging.getLogger(__name__)
 
 SCORE_NAME = "autoencoder"
-#: The side an input whose sides are not multiples of 8 is resized to first (the shallow CNN's own 64x64).
-RESIZED = 64
 
 
 class ConvAutoencoder(nn.Module):
@@ -47,11 +46,7 @@ class ConvAutoencoder(nn.Module):
 
     def target(self, x: torch.Tensor) -> torch.Tensor:
         """``x`` (the steering model's layout) as the autoencoder sees it: NCHW, resized if it must be."""
-        if self.channels_last:
-            x = x.permute(0, 3, 1, 2)
-        if self.resize is not None:
-            x = nn.functional.interpolate(x, size=self.resize, mode="bilinear", align_corners=False)
-        return x
+        return network_input(x, self.channels_last, self.resize)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """The per-frame score: mean squared reconstruction error (shape N)."""
@@ -63,29 +58,15 @@ def train_autoencoder(frames: np.ndarray, contract: PreprocessContract, epochs: 
                       lr: float = 2e-3, seed: int = 0,
                       progress: Callable[[int, int, float], None] | None = None) -> ConvAutoencoder:
     """Fit on preprocessed frames (N, ...) in the contract's layout; ``progress(epoch, epochs, loss)``."""
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    h, w = contract.height, contract.width
-    resize = None if h % 8 == 0 and w % 8 == 0 else (RESIZED, RESIZED)
-    model = ConvAutoencoder(channels_last=contract.layout.lower() == "nhwc", resize=resize)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs * max(1, len(frames) // batch_size))
+    rng = seeded(seed)
+    model = ConvAutoencoder(channels_last(contract), resize=input_resize(contract, 8))
     data = torch.from_numpy(np.ascontiguousarray(frames, dtype=np.float32))
-    for epoch in range(epochs):
-        model.train()
-        order = rng.permutation(len(data))
-        total, count = 0.0, 0
-        for start in range(0, len(order) - batch_size + 1, batch_size):
-            batch = data[torch.from_numpy(order[start:start + batch_size])]
-            loss = model(batch).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            sched.step()
-            total, count = total + loss.item() * len(batch), count + len(batch)
-        if progress is not None:
-            progress(epoch + 1, epochs, total / max(1, count))
-    return model.eval()
+
+    def batch_loss(indices: np.ndarray) -> torch.Tensor:
+        return model(data[torch.from_numpy(indices)]).mean()
+
+    fit_batches(model, len(data), batch_loss, rng, epochs, batch_size, lr, progress)
+    return model
 
 
 def scores(model: ConvAutoencoder, frames: np.ndarray, batch_size: int = 512) -> np.ndarray:

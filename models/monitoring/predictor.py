@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from drive_server.contract import PreprocessContract
-from models.monitoring.autoencoder import RESIZED
+from models.monitoring.training import channels_last, fit_batches, input_resize, network_input, seeded
 
 log = logging.getLogger(__name__)
 
@@ -40,10 +40,7 @@ class FailurePredictor(nn.Module):
         self.head = nn.Linear(2 * width, 1)
 
     def logits(self, x: torch.Tensor) -> torch.Tensor:
-        if self.channels_last:
-            x = x.permute(0, 3, 1, 2)
-        if self.resize is not None:
-            x = nn.functional.interpolate(x, size=self.resize, mode="bilinear", align_corners=False)
+        x = network_input(x, self.channels_last, self.resize)
         return self.head(self.features(x).mean(dim=(2, 3))).reshape(-1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -61,32 +58,18 @@ def train_predictor(frames: np.ndarray, targets: np.ndarray, contract: Preproces
     if positives == 0 or positives == len(targets):
         raise ValueError(f"the failure runs give {positives} frames before a failure of {len(targets)}: both kinds "
                          "are needed")
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    h, w = contract.height, contract.width
-    resize = None if h % 16 == 0 and w % 16 == 0 else (RESIZED, RESIZED)
-    model = FailurePredictor(channels_last=contract.layout.lower() == "nhwc", resize=resize)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    steps = epochs * max(1, len(frames) // batch_size)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps)
+    rng = seeded(seed)
+    model = FailurePredictor(channels_last(contract), resize=input_resize(contract, 16))
     pos_weight = torch.tensor((len(targets) - positives) / positives, dtype=torch.float32)
     loss_fn = nn.BCEWithLogitsLoss(pos_weight=pos_weight)
     y = torch.from_numpy(targets.astype(np.float32))
-    for epoch in range(epochs):
-        model.train()
-        order = rng.permutation(len(frames))
-        total, count = 0.0, 0
-        for start in range(0, len(order) - batch_size + 1, batch_size):
-            idx = np.sort(order[start:start + batch_size])
-            x = torch.from_numpy(frames[idx].astype(np.float32) / 255.0 - 0.5)
-            if rng.random() < 0.5:  # a mirrored road fails as often: flip the picture (the label stays)
-                x = torch.flip(x, dims=(2 if model.channels_last else 3,))
-            loss = loss_fn(model.logits(x), y[idx])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            sched.step()
-            total, count = total + loss.item() * len(idx), count + len(idx)
-        if progress is not None:
-            progress(epoch + 1, epochs, total / max(1, count))
-    return model.eval()
+
+    def batch_loss(indices: np.ndarray) -> torch.Tensor:
+        idx = np.sort(indices)
+        x = torch.from_numpy(frames[idx].astype(np.float32) / 255.0 - 0.5)
+        if rng.random() < 0.5:  # a mirrored road fails as often: flip the picture (the label stays)
+            x = torch.flip(x, dims=(2 if model.channels_last else 3,))
+        return loss_fn(model.logits(x), y[idx])
+
+    fit_batches(model, len(frames), batch_loss, rng, epochs, batch_size, lr, progress)
+    return model
