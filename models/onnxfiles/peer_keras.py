@@ -9,64 +9,33 @@ RGB (contract colour ``rgb``, no scale) and does the colour conversion itself: t
 and offset of ``--yuv opencv31`` (or ``correct``, today's RGB-to-YUV) in OpenCV's own fixed-point
 form, rounded and saturated as the uint8 ``cvtColor`` is (the network is sensitive to that rounding:
 a float conversion moves its steering by up to 0.04), then ``x/127.5 - 1``. Only the weights are
-read (h5py); the layer configs in the file's ``model_config`` are checked against the peer's first.
+read (h5py), after :mod:`models.onnxfiles.peer_h5` has checked the file's layers against the peer's.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import struct
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 from torch import nn
 
-from drive_server.contract import PreprocessContract
 from drive_server.preprocess import frame_to_network_image
+from models.onnxfiles.peer_h5 import ARCH, PEER_CONTRACT, PeerImportError, PeerWeights, read_peer_h5
 from protocol.datalog import read_log
-from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 from protocol.rigfile import REAL_RIG
-
-if TYPE_CHECKING:
-    import h5py
 
 PEER_REPO = "naokishibuya/car-behavioral-cloning"
 PEER_COMMIT = "edf2061"
 #: sha256 of the repository's model.h5 at PEER_COMMIT: only that file is credited to the commit.
 PEER_H5_SHA256 = "cad4f7c3b837e2b387141fd122f1b13d19c5249031d5f273a60c5b1bf171d3e9"
 YUV_MODES = ("opencv31", "correct")
-#: The peer's utils.py: crop rows 60..-25 of the 160-row frame, resize to 200x66 (bilinear), then YUV.
-PEER_CONTRACT = PreprocessContract(width=200, height=66, crop_top=60, crop_bottom=135, color="rgb",
-                                   scale=1.0, offset=0.0, layout="nhwc", interpolation="linear")
-#: (class, filters or units, kernel, stride, activation) of every layer of the peer's model.py, in order.
-ARCH = (("Lambda",), ("Convolution2D", 24, 5, 2, "elu"), ("Convolution2D", 36, 5, 2, "elu"),
-        ("Convolution2D", 48, 5, 2, "elu"), ("Convolution2D", 64, 3, 1, "elu"), ("Convolution2D", 64, 3, 1, "elu"),
-        ("Dropout",), ("Flatten",), ("Dense", 100, "elu"), ("Dense", 50, "elu"), ("Dense", 10, "elu"),
-        ("Dense", 1, "linear"))
 
 # OpenCV's 8-bit BT.601 RGB->YUV coefficients (fixed point, shift 14; the same in 3.1 and 4.x/5.x)
 _ONE, _HALF = 1 << 14, 1 << 13
 _R2YI, _G2YI, _B2YI, _B2UI, _R2VI = 4899, 9617, 1868, 8061, 14369
 _R2Y, _G2Y, _B2Y, _B2U, _R2V = (c / _ONE for c in (_R2YI, _G2YI, _B2YI, _B2UI, _R2VI))
-
-
-class PeerImportError(BadValue):
-    """The file is not the peer's Keras 1 model (message: one line for the user)."""
-
-
-@dataclass(frozen=True)
-class PeerWeights:
-    """Kernels as stored by Keras 1 (conv: rows, cols, in, out; dense: in, out) and the file's facts."""
-
-    convs: list[tuple[np.ndarray, np.ndarray]]
-    dense: list[tuple[np.ndarray, np.ndarray]]
-    keras_version: str
-    sha256: str
 
 
 def yuv_matrix(mode: str) -> tuple[np.ndarray, np.ndarray]:
@@ -150,122 +119,6 @@ def _feature_shape(features: nn.Module) -> tuple[int, int, int]:
     with torch.no_grad():
         out = features(torch.zeros(1, 3, PEER_CONTRACT.height, PEER_CONTRACT.width))
     return int(out.shape[1]), int(out.shape[2]), int(out.shape[3])
-
-
-def read_peer_h5(path: Path) -> PeerWeights:
-    """The weights of the peer's Keras 1 HDF5 file, after checking its layers are the peer's architecture."""
-    path = Path(path)
-    try:
-        import h5py
-    except ModuleNotFoundError:
-        raise PeerImportError('reading Keras .h5 files needs the package h5py (pip install -e ".[peer]")') from None
-    if not path.is_file():
-        raise PeerImportError(f"{path}: no such file")
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise PeerImportError(f"{path}: not an HDF5 file ({str(exc).splitlines()[0] if str(exc) else 'unreadable'})") \
-            from None
-    with f:
-        version = _text(f.attrs.get("keras_version", "1"))
-        if not version.startswith("1"):
-            raise PeerImportError(f"{path}: saved by Keras {version}; only Keras 1 files (the peer's) are supported")
-        if "model_config" not in f.attrs or "model_weights" not in f:
-            raise PeerImportError(f"{path}: not a Keras model file (no model_config and model_weights)")
-        try:
-            config = json.loads(_text(f.attrs["model_config"]))
-            layers = config["config"] if isinstance(config, dict) else None
-        except (json.JSONDecodeError, KeyError, TypeError) as exc:
-            raise PeerImportError(f"{path}: model_config is not a Keras model config ({exc})") from None
-        names = _check_layers(path, layers)
-        group = f["model_weights"]
-        convs = [_weights(path, group, n, 4) for n in names[1:6]]
-        dense = [_weights(path, group, n, 2) for n in names[8:]]
-    _check_shapes(path, convs, dense)
-    return PeerWeights(convs, dense, version, digest)
-
-
-def _text(value: object) -> str:
-    return value.decode("utf-8") if isinstance(value, bytes) else str(value)
-
-
-def _check_layers(path: Path, layers: object) -> list[str]:
-    """Layer names of a config matching ARCH; PeerImportError naming the first difference."""
-    if not isinstance(layers, list) or len(layers) != len(ARCH):
-        found = [layer.get("class_name") for layer in layers if isinstance(layer, dict)] if isinstance(layers, list) \
-            else layers
-        raise PeerImportError(f"{path}: expected the peer's {len(ARCH)} layers "
-                              f"({', '.join(a[0] for a in ARCH)}), the file has {found}")
-    names = []
-    for i, (layer, spec) in enumerate(zip(layers, ARCH, strict=True)):
-        cfg = layer.get("config", {}) if isinstance(layer, dict) else {}
-        kind = layer.get("class_name") if isinstance(layer, dict) else None
-        got: tuple[object, ...]
-        if kind == "Convolution2D":
-            stride = (cfg.get("subsample") or [1])[0]
-            got = (kind, cfg.get("nb_filter"), cfg.get("nb_row"), stride, cfg.get("activation"))
-            if cfg.get("nb_col") != cfg.get("nb_row") or list(cfg.get("subsample", [1, 1])) != [got[3]] * 2:
-                got = (*got, "non-square")
-            if cfg.get("dim_ordering") != "tf" or cfg.get("border_mode") != "valid":
-                raise PeerImportError(f"{path}: layer {i + 1} ({cfg.get('name')}) has dim_ordering "
-                                      f"{cfg.get('dim_ordering')!r}, border_mode {cfg.get('border_mode')!r}; "
-                                      "only the peer's 'tf', 'valid' (TensorFlow-backend kernels) are supported")
-        elif kind == "Dense":
-            got = (kind, cfg.get("output_dim"), cfg.get("activation"))
-        else:
-            got = (kind,)
-        if got != spec or cfg.get("bias", True) is not True:
-            raise PeerImportError(f"{path}: layer {i + 1} ({cfg.get('name')}) is {got}, the peer's model has {spec}")
-        names.append(str(cfg.get("name")))
-    _check_lambda(path, layers[0].get("config", {}))
-    return names
-
-
-def _check_lambda(path: Path, cfg: dict) -> None:
-    """The Lambda's marshalled code must hold the constants 127.5 and 1.0 (x/127.5 - 1) and take 66x200x3."""
-    shape = cfg.get("batch_input_shape")
-    if list(shape or [])[1:] != [PEER_CONTRACT.height, PEER_CONTRACT.width, 3]:
-        raise PeerImportError(f"{path}: the model's input is {shape}, the peer's is [None, 66, 200, 3]")
-    function = cfg.get("function")
-    code = function[0] if isinstance(function, list) and function else function
-    try:
-        raw = str(code).encode("raw_unicode_escape")
-    except UnicodeEncodeError:
-        raw = b""
-    if struct.pack("<d", 127.5) not in raw or struct.pack("<d", 1.0) not in raw:
-        raise PeerImportError(f"{path}: the input Lambda is not the peer's x/127.5 - 1 normalisation")
-
-
-def _weights(path: Path, group: h5py.Group, name: str, rank: int) -> tuple[np.ndarray, np.ndarray]:
-    if name not in group:
-        raise PeerImportError(f"{path}: no weights for layer {name!r} under model_weights/")
-    layer = group[name]
-    names = [_text(n) for n in layer.attrs.get("weight_names", [])]
-    if len(names) != 2 or any(n not in layer for n in names):
-        raise PeerImportError(f"{path}: layer {name!r} should hold a kernel and a bias, it holds {names}")
-    w, b = (np.asarray(layer[n], dtype=np.float32) for n in names)
-    if w.ndim != rank or b.ndim != 1 or b.shape[0] != w.shape[-1]:
-        raise PeerImportError(f"{path}: layer {name!r} has kernel {list(w.shape)} and bias {list(b.shape)}")
-    if not (np.isfinite(w).all() and np.isfinite(b).all()):
-        raise PeerImportError(f"{path}: layer {name!r} holds non-finite weights")
-    return w, b
-
-
-def _check_shapes(path: Path, convs: list[tuple[np.ndarray, np.ndarray]],
-                  dense: list[tuple[np.ndarray, np.ndarray]]) -> None:
-    channels, height, width = 3, PEER_CONTRACT.height, PEER_CONTRACT.width
-    for (w, _), spec in zip(convs, ARCH[1:6], strict=True):
-        want = (spec[2], spec[2], channels, spec[1])
-        if w.shape != want:
-            raise PeerImportError(f"{path}: a convolution kernel is {list(w.shape)}, expected {list(want)} "
-                                  "(rows, cols, in, out)")
-        channels, height, width = spec[1], (height - spec[2]) // spec[3] + 1, (width - spec[2]) // spec[3] + 1
-    features = channels * height * width
-    for (w, _), dense_spec in zip(dense, ARCH[8:], strict=True):
-        if w.shape != (features, dense_spec[1]):
-            raise PeerImportError(f"{path}: a dense kernel is {list(w.shape)}, expected {[features, dense_spec[1]]}")
-        features = dense_spec[1]
 
 
 def model_info(weights: PeerWeights, h5: Path, yuv: str) -> dict:
