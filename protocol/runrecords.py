@@ -58,7 +58,7 @@ def write_text(path: Path, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
-def json_default(value: Any) -> Any:
+def json_default(value: object) -> object:
     """What ``json.dumps`` cannot write itself: a numpy number as the number it holds (a numpy count summed into a
     figure would otherwise be written as the string "22"), anything else (a path, a date) as its text."""
     item = getattr(value, "item", None)
@@ -67,11 +67,11 @@ def json_default(value: Any) -> Any:
     return str(value)
 
 
-def write_json(path: Path, data: Any, sort_keys: bool = False) -> None:
+def write_json(path: Path, data: object, sort_keys: bool = False) -> None:
     write_text(path, json.dumps(data, indent=2, sort_keys=sort_keys, default=json_default) + "\n")
 
 
-def read_json(path: Path) -> Any:
+def read_json(path: Path) -> Any:  # json.loads's own type: the caller knows the document's shape
     """A JSON file a run, an evaluation or a user wrote; one that is not JSON (cut short, or not text) is the user's
     to fix: a :class:`~protocol.errors.BadValue` naming the file, not a bug's traceback."""
     try:

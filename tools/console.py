@@ -10,8 +10,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import sys
-from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any, Literal, NoReturn
+from collections.abc import Iterator, Mapping
+from typing import TYPE_CHECKING, Literal, NoReturn
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -77,7 +77,7 @@ class RunProgress:
     def __init__(self, most: int) -> None:
         self._bar = bar(most, "runs", "run")
 
-    def record(self, record: dict[str, Any]) -> None:
+    def record(self, record: Mapping[str, object]) -> None:
         msg = f"{record['experiment']}={record['value']} seed {record['seed']}: " \
               f"{'ok' if record['autonomous'] else 'intervention'}"
         log.debug("%s", msg)

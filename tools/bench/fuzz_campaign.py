@@ -9,7 +9,6 @@ import random
 import struct
 import threading
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -52,7 +51,7 @@ class Mix:
         g = self.good[0]
         bomb, small = _bomb_b64(g["image"]), _small_jpeg_b64()
         event = '42["telemetry",{}]'.format
-        bad_payloads: list[Any] = [
+        bad_payloads: list[object] = [
             dict(g, image="!!!not base64!!!"), dict(g, image=base64.b64encode(b"GIF89a" + bytes(64)).decode()),
             dict(g, image=small), dict(g, image=bomb), dict(g, image=g["image"][: len(g["image"]) // 3]),
             dict(g, image=12), dict(g, speed="NaN"), dict(g, speed="abc"), dict(g, speed="1_000"),

@@ -16,7 +16,7 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -79,8 +79,17 @@ def load_frames(log_dir: Path | None) -> tuple[list[SourceFrame], str]:
     return synthetic_frames(64), "64 synthetic frames"
 
 
+class ClientRun(TypedDict, total=False):
+    """One client's closed loop (``rtts``, ``start``, ``end``), or the ``error`` that ended it."""
+
+    rtts: np.ndarray
+    start: float
+    end: float
+    error: str
+
+
 def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int,
-                 barrier: Barrier | None = None) -> dict[str, Any]:
+                 barrier: Barrier | None = None) -> ClientRun:
     """One client: warm up, wait for the others, then ``frames_n`` timed exchanges."""
     frames, _ = load_frames(log_dir)
     payloads = [f.payload() for f in frames]
@@ -98,7 +107,7 @@ def _closed_loop(url: str, log_dir: Path | None, frames_n: int, warmup: int,
 
 
 def _worker(url: str, log_dir: Path | None, frames_n: int, warmup: int, barrier: Barrier,
-            results: Queue[dict[str, Any]]) -> None:
+            results: Queue[ClientRun]) -> None:
     try:
         results.put(_closed_loop(url, log_dir, frames_n, warmup, barrier))
     except BaseException as exc:  # report, never hang the parent

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -109,12 +109,14 @@ def build_model(arch: Arch, contract: PreprocessContract | None = None, seed: in
     return model
 
 
-def save_model(arch: Arch | str, path: Path, **kwargs: Any) -> Path:
-    """Build ``arch`` (an ``Arch`` or its name) and write it to ``path``."""
+def save_model(arch: Arch | str, path: Path, *, contract: PreprocessContract | None = None, seed: int = 0,
+               with_metadata: bool = True, layout: str = "nhwc") -> Path:
+    """Build ``arch`` (an ``Arch`` or its name) with :func:`build_model`'s arguments and write it to ``path``."""
     arch = ARCHS[arch] if isinstance(arch, str) else arch
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(build_model(arch, **kwargs).SerializeToString())
+    model = build_model(arch, contract=contract, seed=seed, with_metadata=with_metadata, layout=layout)
+    path.write_bytes(model.SerializeToString())
     return path
 
 

@@ -15,9 +15,9 @@ import bisect
 import itertools
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
@@ -80,7 +80,7 @@ class Soak(SoakMix):
         self.samples: list[Sample] = []
 
     # -- the run ----------------------------------------------------------------------------------
-    def run(self, progress: Callable[[float, Sample], None] | None = None) -> dict[str, Any]:
+    def run(self, progress: Callable[[float, Sample], None] | None = None) -> SoakResult:
         cfg = self.config
         with UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S) as client:  # the recorder opens its log
             for payload in self.payloads[:3]:
@@ -113,7 +113,8 @@ class Soak(SoakMix):
         _, p50_first, p99_first = self._window(0.0, edge)
         _, p50_last, p99_last = self._window(cfg.duration_s - edge, cfg.duration_s)
         warm = next((s for s in self.samples if s.t_s >= edge), None)
-        minutes = []  # the latency per whole window of EDGE_WINDOW_S (a p99 over 10 s is the 9th-worst frame)
+        # the latency per whole window of EDGE_WINDOW_S (a p99 over 10 s is the 9th-worst frame)
+        minutes: list[WindowRow] = []
         for k in range(int(cfg.duration_s // edge)):
             frames, p50, p99 = self._window(k * edge, (k + 1) * edge)
             minutes.append({"t_s": round((k + 1) * edge, 1), "frames": frames, "p50_ms": p50, "p99_ms": p99})
@@ -129,7 +130,7 @@ class Soak(SoakMix):
             "fds_end": fds_end,
             "edge_window_s": edge, "p50_ms_first_minute": p50_first, "p99_ms_first_minute": p99_first,
             "p50_ms_last_minute": p50_last, "p99_ms_last_minute": p99_last,
-            "samples": [asdict(s) for s in self.samples], "minutes": minutes, "errors": tally.errors,
+            "samples": [_sample_row(s) for s in self.samples], "minutes": minutes, "errors": tally.errors,
         }
 
     def _window(self, a: float, b: float) -> tuple[int, float | None, float | None]:
@@ -143,6 +144,69 @@ class Soak(SoakMix):
             return 0, None, None
         arr = np.asarray(ms) * 1e3
         return int(arr.size), round(float(np.percentile(arr, 50)), 3), round(float(np.percentile(arr, 99)), 3)
+
+
+class SampleRow(TypedDict):
+    """A :class:`Sample` as the result holds it."""
+
+    t_s: float
+    rss_mib: float | None
+    fds: int | None
+    frames: int
+    p50_ms: float | None
+    p99_ms: float | None
+
+
+def _sample_row(s: Sample) -> SampleRow:
+    return {"t_s": s.t_s, "rss_mib": s.rss_mib, "fds": s.fds, "frames": s.frames, "p50_ms": s.p50_ms,
+            "p99_ms": s.p99_ms}
+
+
+class WindowRow(TypedDict):
+    """The latency of one whole window of ``edge_window_s``."""
+
+    t_s: float
+    frames: int
+    p50_ms: float | None
+    p99_ms: float | None
+
+
+class SoakResult(TypedDict):
+    """What :meth:`Soak.run` measured; ``rbc soak`` adds the recording's and the server's figures."""
+
+    duration_s: float
+    clients: int
+    rates_hz: list[float]
+    telemetries: int
+    answered: int
+    unanswered: int
+    double_answered: int
+    wrong_kind: int
+    driving_disconnects: int
+    malformed: int
+    reconnects: int
+    idle_sessions: int
+    live_events: int
+    rss_mib_before: float | None
+    rss_mib_start: float | None
+    rss_mib_end: float | None
+    fds_start: int | None
+    fds_running_start: int | None
+    fds_running_end: int | None
+    fds_end: int | None
+    edge_window_s: float
+    p50_ms_first_minute: float | None
+    p99_ms_first_minute: float | None
+    p50_ms_last_minute: float | None
+    p99_ms_last_minute: float | None
+    samples: list[SampleRow]
+    minutes: list[WindowRow]
+    errors: list[str]
+    recorded_rows: NotRequired[int]
+    recorded_missing_images: NotRequired[int]
+    server_exit_code: NotRequired[int]
+    server_tracebacks: NotRequired[int]
+    server_faults: NotRequired[dict[str, int]]
 
 
 def check_recording(folder: Path) -> tuple[int, int]:

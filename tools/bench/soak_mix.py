@@ -14,10 +14,9 @@ from __future__ import annotations
 import threading
 import time
 import urllib.request
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from functools import partial
-from typing import Any
 
 from protocol import SteerCommand
 from tools.wire.frames import SourceFrame
@@ -101,7 +100,7 @@ class SoakMix:
                 return
             tally.double_answered += 1
 
-    def _exchange(self, client: UnityWireClient, payload: dict[str, Any] | None, tally: Tally) -> float:
+    def _exchange(self, client: UnityWireClient, payload: Mapping[str, object] | None, tally: Tally) -> float:
         """One telemetry that must be answered with a steer (a good frame, or a bad one's fallback)."""
         tally.telemetries += 1
         try:

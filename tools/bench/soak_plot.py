@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from protocol.runrecords import atomic_path
 
+if TYPE_CHECKING:
+    from tools.bench.soak import SoakResult
 
-def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
+
+def plot_soak(result: SoakResult, path: Path) -> Path | None:
     """Three stacked panels over minutes of the run; None when matplotlib (extra ``plots``) is missing."""
     try:
         import matplotlib
@@ -23,8 +26,8 @@ def plot_soak(result: dict[str, Any], path: Path) -> Path | None:
     rss = axes[0]
     rss.plot(t, [s["rss_mib"] for s in samples], color="tab:blue")
     rss.set_ylabel("server RSS (MiB)")
-    if result.get("rss_mib_start") is not None:
-        rss.axhline(result["rss_mib_start"] + 20, color="tab:red", ls=":", lw=1, label="start + 20 MiB")
+    if (rss_start := result.get("rss_mib_start")) is not None:
+        rss.axhline(rss_start + 20, color="tab:red", ls=":", lw=1, label="start + 20 MiB")
         rss.legend(loc="lower right", fontsize=8)
     axes[1].plot(t, [s["fds"] for s in samples], color="tab:green")
     axes[1].set_ylabel("open fds")

@@ -15,7 +15,7 @@ from pathlib import Path
 from protocol.errors import BadValue
 from protocol.runrecords import code_version, file_sha256, write_json
 from tools.bench.fuzz_campaign import DEFAULT_LOG
-from tools.bench.soak import SoakConfig, check_recording
+from tools.bench.soak import SoakConfig, SoakResult, check_recording
 from tools.wire.frames import log_frames, synthetic_frames
 
 _DEFAULTS = SoakConfig()
@@ -36,17 +36,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", type=Path, default=None, help="the plot (default: the --json path with .png)")
 
 
-def _verdict(result: dict) -> list[str]:
+def _verdict(result: SoakResult) -> list[str]:
     """The issue's targets, each as one line with its figure."""
     lines = []
-    growth = None if result["rss_mib_start"] is None else round(result["rss_mib_end"] - result["rss_mib_start"], 1)
+    start, end = result["rss_mib_start"], result["rss_mib_end"]
+    growth = None if start is None or end is None else round(end - start, 1)
     p99a, p99b = result["p99_ms_first_minute"], result["p99_ms_last_minute"]
+    fds_start, fds_end = result["fds_start"], result["fds_end"]
     drift = None if not p99a or p99b is None else round(100 * (p99b - p99a) / p99a, 1)
     checks = [
         ("every telemetry answered once", result["unanswered"] == 0 and result["double_answered"] == 0,
          f"{result['unanswered']} unanswered, {result['double_answered']} answered twice"),
         ("RSS growth < 20 MiB", growth is not None and growth < 20, f"{growth:+} MiB" if growth is not None else "-"),
-        ("fds back to their start", result["fds_end"] is not None and result["fds_end"] <= result["fds_start"],
+        ("fds back to their start", fds_end is not None and fds_start is not None and fds_end <= fds_start,
          f"{result['fds_start']} -> {result['fds_end']}"),
         ("p99 of the last minute within 20 % of the first", drift is not None and drift <= 20,
          f"{p99a} -> {p99b} ms ({drift:+} %)" if drift is not None else "-"),
@@ -94,8 +96,8 @@ def run(args: argparse.Namespace) -> int:
         server.cleanup()
     rows, missing = check_recording(record_dir)
     stats = json.loads(stats_json.read_text()) if stats_json.is_file() else {}
-    result.update(recorded_rows=rows, recorded_missing_images=missing, server_exit_code=code,
-                  server_tracebacks=log_text.count("Traceback"), server_faults=stats.get("faults", {}))
+    result.update({"recorded_rows": rows, "recorded_missing_images": missing, "server_exit_code": code,
+                   "server_tracebacks": log_text.count("Traceback"), "server_faults": stats.get("faults", {})})
     if own_dir:
         shutil.rmtree(record_dir.parent, ignore_errors=True)
     print(f"telemetries {result['telemetries']:,} (answered {result['answered']:,}; unanswered {result['unanswered']}; "

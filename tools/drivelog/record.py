@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -14,7 +13,7 @@ from tools.drivelog.road import RoadEdges
 
 
 def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias: float,
-                  camera: UnityCamera = DEFAULT_CAMERA, road: RoadEdges | None = None) -> dict[str, Any]:
+                  camera: UnityCamera = DEFAULT_CAMERA, road: RoadEdges | None = None) -> dict[str, object]:
     """``eta`` (percent), ``interventions``, ``offset_rms_m`` and ``frames``, with what they were measured under."""
     return {
         "data": str(data),

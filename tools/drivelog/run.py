@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Protocol, TypedDict, TypeVar
 
 import numpy as np
 
@@ -35,6 +35,17 @@ T = TypeVar("T")
 Bars = Callable[[str], Bar] | None
 
 
+class MonitorOutcome(TypedDict):
+    """The monitor on a drive: the take-overs it foresaw and how early (``foresight``), and what it saw."""
+
+    takeovers_scored: int
+    foreseen: int
+    foreseen_1s: int
+    leads_s: list[float | None]
+    episodes: int  # warning episodes
+    frames_scored: int
+
+
 @dataclass(frozen=True)
 class RecordingRun:
     """A closed loop on a recording and what it was driven with."""
@@ -43,10 +54,10 @@ class RecordingRun:
     driver: str  # the driver's name, for the record
     road: RoadEdges | None  # the road's edges in every frame (lane="road")
     wheelbase_fit: WheelbaseFit | None  # None: given, or the default where the frames could not say
-    monitor: dict[str, Any] | None = None  # the model's misbehaviour monitor on the drive (monitor_outcome)
+    monitor: MonitorOutcome | None = None  # the model's misbehaviour monitor on the drive (monitor_outcome)
 
 
-def monitor_outcome(log: RecordedDrive, result: LoopResult, readings: list[tuple[int, int]]) -> dict[str, Any]:
+def monitor_outcome(log: RecordedDrive, result: LoopResult, readings: list[tuple[int, int]]) -> MonitorOutcome:
     """Which take-overs the monitor foresaw, and how early: the benchmark's rules on the recording's own clock
     (each take-over counts as leaving the road; ones right after another are left out as in the benchmark)."""
     from tools.monitoreval.scoring import DEFAULT_RULES, RunTrace, episodes, foresight
@@ -56,8 +67,10 @@ def monitor_outcome(log: RecordedDrive, result: LoopResult, readings: list[tuple
     level = np.array([lv for _, lv in readings], dtype=np.uint8)
     takeovers = [(float(clock[k.frame]), "off_road") for k in result.takeovers]
     trace = RunTrace("drive-log", "real", t, level, takeovers, float(clock[-1]) if len(clock) else 0.0)
-    return foresight(trace, DEFAULT_RULES) | {"episodes": int(len(episodes(trace, DEFAULT_RULES))),
-                                              "frames_scored": len(readings)}
+    found = foresight(trace, DEFAULT_RULES)
+    return {"takeovers_scored": found["takeovers_scored"], "foreseen": found["foreseen"],
+            "foreseen_1s": found["foreseen_1s"], "leads_s": found["leads_s"],
+            "episodes": int(len(episodes(trace, DEFAULT_RULES))), "frames_scored": len(readings)}
 
 
 def _with_bar(bars: Bars, phase: str, work: Callable[[Bar | None], T]) -> T:

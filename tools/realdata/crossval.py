@@ -15,7 +15,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -62,7 +62,7 @@ class RecordingScore:
     def beats_zero(self) -> bool:
         return self.mse < self.zero_mse
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, object]:
         return asdict(self) | {"beats_zero": self.beats_zero}
 
 
@@ -232,7 +232,7 @@ def measure_version(root: Path | None = None) -> str:
     return code_digest(MEASURE_ENTRY, root=root or CODE_ROOT)
 
 
-def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: Any, smooth: float | None,
+def score_key(what: str, name: str, model: Path, closed_loop: bool, rules: LoopRules | None, smooth: float | None,
               code: str = "", data: str = "") -> str:
     """Everything a recording's score depends on, as one canonical string: with ``code`` (the code version)
     a run resumed after the measure's code changed scores every recording afresh instead of mixing two, with

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from tools.drivelog.loop import LoopRules
 from tools.errors import CommandError
@@ -121,7 +120,7 @@ def _check_models(plan: CrossvalPlan, every: list[PublicRecording], recs: list[P
 
 
 def _record(plan: CrossvalPlan, pattern: str, results: dict[str, list[RecordingScore]], folds: list[str],
-            done: int) -> dict[str, Any]:
+            done: int) -> dict[str, object]:
     """The ``--json`` record once the first ``done`` of ``folds`` are scored: the settings and the scores."""
     from protocol.runrecords import code_version
     from tools.realdata.crossval import summarise

@@ -17,7 +17,7 @@ import shutil
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from models.networks.runfiles import RunPaths, RunRecord
 from protocol.codeversion import ROOT, code_digest, data_digest
@@ -54,7 +54,7 @@ def is_finished(run_dir: Path) -> bool:
         return False
 
 
-def fold_key(config: TrainConfig) -> dict[str, Any]:
+def fold_key(config: TrainConfig) -> dict[str, object]:
     """Everything a fold's model depends on: the resolved settings (recordings by name, wherever they lie), each
     recording's data and the training code (:data:`TRAIN_ENTRY` and all it imports, under :data:`CODE_ROOT`)."""
     settings = {k: v for k, v in asdict(config).items() if k not in EXECUTION_ONLY}
@@ -64,7 +64,7 @@ def fold_key(config: TrainConfig) -> dict[str, Any]:
                                  sort_keys=True, default=str))
 
 
-def _stored_key(run_dir: Path) -> dict[str, Any] | None:
+def _stored_key(run_dir: Path) -> dict[str, object] | None:
     try:
         return json.loads((run_dir / KEY_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError):

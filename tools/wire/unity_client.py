@@ -14,8 +14,9 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Mapping
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -125,7 +126,7 @@ class UnityWireClient:
         """Send arbitrary bytes as one frame (for tests of what the server refuses)."""
         self._send_frame(opcode, data)
 
-    def send_telemetry(self, payload: dict[str, Any] | None) -> None:
+    def send_telemetry(self, payload: Mapping[str, object] | None) -> None:
         """Emit one ``telemetry`` event as the simulator would; ``None`` is a manual-mode frame.
 
         Numbers are formatted like Unity (4 decimals) and every value is sent as a string with this
@@ -133,11 +134,11 @@ class UnityWireClient:
         """
         self._send_raw(self.telemetry_frame(payload))
 
-    def telemetry_frame(self, payload: dict[str, Any] | None) -> bytes:
+    def telemetry_frame(self, payload: Mapping[str, object] | None) -> bytes:
         """The masked WebSocket frame of one ``telemetry`` event (see ``send_telemetry``)."""
         return _frame(OP_TEXT, self.telemetry_text(payload).encode("utf-8"))
 
-    def telemetry_text(self, payload: dict[str, Any] | None) -> str:
+    def telemetry_text(self, payload: Mapping[str, object] | None) -> str:
         """The Engine.IO packet text of one ``telemetry`` event (see ``send_telemetry``)."""
         if payload is None:
             return '42["telemetry",null]'
@@ -155,7 +156,7 @@ class UnityWireClient:
             fields.append(_json_string(key) + ":" + _json_string(value))
         return '42["telemetry",{' + ",".join(fields) + "}]"
 
-    def open_burst(self, payload: dict[str, Any] | None) -> None:
+    def open_burst(self, payload: Mapping[str, object] | None) -> None:
         """Send two telemetries back to back, as the simulator does when the socket opens.
 
         After this the loop has pipeline depth 2: read two replies, or keep sending one frame per
@@ -187,7 +188,7 @@ class UnityWireClient:
             else:
                 log.debug("ignoring packet %r", text[:60])
 
-    def exchange(self, payload: dict[str, Any] | None) -> tuple[SteerCommand | None, float]:
+    def exchange(self, payload: Mapping[str, object] | None) -> tuple[SteerCommand | None, float]:
         """Send one telemetry, wait for its reply; returns (command or None for manual, round trip s).
 
         The round trip runs from the moment the encoded frame is handed to the socket to the parsed

@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
-from typing import Any
 
 import numpy as np
 
@@ -49,7 +48,7 @@ class Rules:
     reset_speed_kmh: float = 15.0  # ... rolling at this speed
     reset_cone_clearance_m: float = 3.0  # ... and never right on top of a cone
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return asdict(self)
 
 
@@ -81,7 +80,7 @@ class Intervention:
     y: float
     t: float  # simulated seconds since the start of the run
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {"cause": str(self.cause), "s": round(self.s, 2), "x": round(self.x, 2), "y": round(self.y, 2),
                 "t": round(self.t, 3)}
 
@@ -239,7 +238,7 @@ class LapResult:
             out[str(i.cause)] = out.get(str(i.cause), 0) + 1
         return out
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {
             "lap": self.lap, "completed": self.completed, "lap_time_s": round(self.lap_time_s, 3),
             "distance_m": round(self.distance_m, 2), "eta": round(self.eta, 3),

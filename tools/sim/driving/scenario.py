@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import statistics
 from dataclasses import asdict, dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -77,7 +76,7 @@ class ScenarioConfig:
             return self.max_lap_time_s
         return max(120.0, 4.0 * track_length_m / kmh_to_mps(self.speed_limit_kmh))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return asdict(self)
 
 
@@ -117,7 +116,7 @@ class RunResult:
     def mean_eta(self) -> float:
         return statistics.fmean(lap.eta for lap in self.laps) if self.laps else 0.0
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {
             "config": self.config.to_dict(), "rules": self.rules.to_dict(), "driver": self.driver,
             "laps": [lap.to_dict() for lap in self.laps], "completed": self.completed,

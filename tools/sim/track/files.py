@@ -10,10 +10,10 @@ import hashlib
 import json
 import logging
 import math
+from collections.abc import Mapping
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -56,12 +56,12 @@ _TOP_KEYS = {"name", "version", "description", "centerline", "road_width", "lane
 _REQUIRED = ("name", "version", "centerline", "road_width")
 
 
-def track_text(doc: dict[str, Any]) -> str:
+def track_text(doc: Mapping[str, object]) -> str:
     """A track document as the text of its file: one serialisation, so equal documents give equal files."""
     return json.dumps(doc, indent=1) + "\n"
 
 
-def write_track_file(path: str | Path, doc: dict[str, Any]) -> Path:
+def write_track_file(path: str | Path, doc: Mapping[str, object]) -> Path:
     """Write a track document (temp file, then rename: a reader never sees half a file), creating its folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
