@@ -10,7 +10,7 @@ gym = pytest.importorskip("gymnasium", reason="the gym extra is not installed (p
 
 from protocol.errors import BadValue  # noqa: E402
 from tools.envs import ENV_ID, DriveEnv, WorldDistribution  # noqa: E402
-from tools.envs.drive_env import check_reset_options  # noqa: E402
+from tools.envs.reset_options import check_reset_options  # noqa: E402
 
 #: three small training worlds (their files are generated once per machine), drawn without light or fog
 POOL = {"seeds": (0, 2), "pool": 2, "new_world_steps": 30}
@@ -64,12 +64,12 @@ def test_a_rotating_pool_of_worlds_and_light_and_fog_every_episode():
     rotating = DriveEnv(worlds={"seeds": (0, 999), "pool": 2, "new_world_steps": 25, "prefetch": False},
                         jpeg=False)
     _, info = rotating.reset(seed=5)
-    pools = [list(rotating._pool)]
+    pools = [list(rotating.rotation.pool)]
     for episode in range(1, 8):
         for _ in range(10):
             _, _, _, _, info = rotating.step(info["expert_action"])
         _, info = rotating.reset()
-        pool = rotating._pool
+        pool = rotating.rotation.pool
         assert len(pool) == 2 and info["world"] in [w for w, _ in pool]
         if episode in (3, 6):  # 30 steps >= 25: the oldest leaves, a new one comes in and is driven at once
             assert pool[0] == pools[-1][1] and info["world"] == pool[1][0] and pool[1] not in pools[-1]
@@ -154,8 +154,8 @@ def test_themes_restrict_the_generated_worlds():
 # ------------------------------------------------------------------------------------------------ observations
 
 def test_the_model_observation_is_what_drive_server_feeds_the_network():
-    from drive_server.model import SteeringModel
-    from drive_server.preprocess import frame_to_network_image, jpeg_reduction
+    from drive_server.serving.model import SteeringModel
+    from drive_server.serving.preprocess import frame_to_network_image, jpeg_reduction
     from protocol.jpeg import decode_jpeg
     from tools.envs.config import MODEL_CONTRACTS
 

@@ -105,8 +105,9 @@ def bench_worlds(episodes: int = 6, steps: int = 1000, first_seed: int = 100, se
     import numpy as np
 
     import tools.envs  # noqa: F401
-    from tools.envs.drive_env import WORLD_STREAM
-    from tools.envs.worlds import WorldDistribution, track_path
+    from tools.envs.rotation import WORLD_STREAM
+    from tools.envs.worldcache import track_path
+    from tools.envs.worlds import WorldDistribution
 
     dist = WorldDistribution(seeds=(first_seed, first_seed + 999), light=None, fog=None, pool=pool,
                              new_world_steps=new_world_steps)
@@ -123,8 +124,8 @@ def bench_worlds(episodes: int = 6, steps: int = 1000, first_seed: int = 100, se
         try:
             for name in [label, "already built"] if prefetch else [label]:
                 _, info = env.reset(seed=seed)
-                for track, sun in drive._pool:  # the first pool: built before the clock starts
-                    drive.worlds.get(drive._world_key(track, sun))
+                for track, sun in drive.rotation.pool:  # the first pool: built before the clock starts
+                    drive.worlds.get(drive.rotation.key(track, sun))
                 drive.worlds.wait()
                 builds0, waits0 = drive.worlds.builds, drive.worlds.waits
                 t0, c0 = time.perf_counter(), time.process_time()

@@ -20,7 +20,7 @@ import numpy as np
 from protocol import SpeedUnit, SteerCommand, encode_telemetry, parse_number
 from protocol.jpeg import decode_jpeg, encode_jpeg
 from protocol.units import from_kmh, to_kmh
-from tools.envs.worlds import BuiltWorld, WorldKey, with_fog
+from tools.envs.worldcache import BuiltWorld, WorldKey, with_fog
 from tools.sim.driving.autopilot import Autopilot, AutopilotParams
 from tools.sim.driving.rules import angle_diff
 from tools.sim.driving.scenario import ScenarioConfig

@@ -17,85 +17,26 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from drive_server.preprocess import frame_to_network_image, jpeg_reduction
+from drive_server.serving.preprocess import frame_to_network_image, jpeg_reduction
 from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
 from protocol.errors import BadValue, UserError
 from protocol.jpeg import decode_jpeg
 from tools.envs.client import Episode, HeadlessSimClient
 from tools.envs.config import config_from_kwargs, resolve_track
-from tools.envs.worlds import WorldKey, shared_cache
+from tools.envs.reset_options import check_reset_options
+from tools.envs.rotation import WorldRotation
+from tools.envs.worldcache import shared_cache
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-    from drive_server.contract import PreprocessContract
-    from drive_server.monitor import ClientMonitor
-    from drive_server.pipeline import DrivePipeline
+    from drive_server.serving.client_monitor import ClientMonitor
+    from drive_server.serving.contract import PreprocessContract
+    from drive_server.serving.pipeline import DrivePipeline
 
 FRAME_SHAPE = (FRAME_HEIGHT, FRAME_WIDTH, 3)
 #: the speed observation's upper bound (km/h): the simulated car's top speed
 MAX_SPEED_KMH = 130.0
-#: the distribution's stream of worlds, apart from the episode's own draws (np_random)
-WORLD_STREAM = 0x3D1
-#: what ``reset(options=...)`` may pin for one episode
-RESET_OPTIONS = ("spawn_s", "cone_seed", "track", "world_seed", "themes", "sun_deg", "light_intensity", "fog")
-
-
-def check_reset_options(options: dict[str, Any] | None, purpose: str) -> dict[str, Any]:
-    """``reset``'s options, checked and normalised (``world_seed`` becomes ``track="world:SEED"``); every bad one
-    is a BadValue of one line, before anything changes."""
-    if options is None:
-        return {}
-    if not isinstance(options, dict):
-        raise BadValue(f"reset options must be a dict, got {options!r}")
-    unknown = sorted(map(str, set(options) - set(RESET_OPTIONS)))
-    if unknown:
-        raise BadValue(f"unknown reset option(s): {', '.join(unknown)} (known: {', '.join(RESET_OPTIONS)})")
-    pinned = dict(options)
-    numbers = {"spawn_s": ("a finite number", lambda v: True),
-               "sun_deg": ("an angle in [-90, 90]", lambda v: -90 <= v <= 90),
-               "light_intensity": ("a number >= 0", lambda v: v >= 0), "fog": ("a number > 0", lambda v: v > 0)}
-    for name, (bounds, ok) in numbers.items():
-        value = pinned.get(name)
-        if value is None:
-            pinned.pop(name, None)
-            continue
-        if not isinstance(value, int | float) or isinstance(value, bool) or not np.isfinite(value) or not ok(value):
-            raise BadValue(f"reset option {name} must be {bounds}, got {value!r}")
-        pinned[name] = float(value)
-    for name in ("cone_seed", "world_seed"):
-        value = pinned.get(name)
-        if value is not None and (not isinstance(value, int | np.integer) or isinstance(value, bool) or value < 0):
-            raise BadValue(f"reset option {name} must be an integer >= 0, got {value!r}")
-    if "world_seed" in pinned and pinned.get("track") is not None:
-        raise BadValue("reset options: give track or world_seed, not both")
-    if pinned.get("world_seed") is not None:
-        pinned["track"] = f"world:{int(pinned.pop('world_seed'))}"
-    pinned.pop("world_seed", None)
-    track = pinned.get("track")
-    if track is not None:
-        if not isinstance(track, str) or not track:
-            raise BadValue(f"reset option track must be a track name, file or world:SEED, got {track!r}")
-        from tools.sim.collect.worlds import training_seed_problem
-        from tools.sim.track.files import world_seed_of
-
-        seed = world_seed_of(track)
-        problem = training_seed_problem(seed, 1) if seed is not None and purpose == "train" else None
-        if problem:
-            raise BadValue(f"reset option track={track}: {problem}", "make the environment with purpose='eval' "
-                                                                    "to evaluate on it (never train on it)")
-    else:
-        pinned.pop("track", None)
-    if "themes" in pinned:
-        from tools.envs.worlds import _strings
-        from tools.sim.track.road import THEMES
-
-        themes = _strings("reset option themes", pinned["themes"])
-        if not themes or set(themes) - set(THEMES):
-            raise BadValue(f"reset option themes must be a non-empty list of {', '.join(THEMES)}, "
-                           f"got {pinned['themes']!r}")
-        pinned["themes"] = tuple(sorted(set(themes)))
-    return pinned
 
 
 class EnvClosedError(BadValue, gym.error.ClosedEnvironmentError):
@@ -151,26 +92,21 @@ class DriveEnv(gym.Env):
         self._last_info: dict[str, Any] | None = None  # the last step's, until reset() (see _relabel_auto_reset)
         self._monitor_pipeline, self._monitor = self._load_monitor(config.monitor)
         self.worlds = shared_cache(config.worlds.pool + 2 if config.worlds else 1)
-        # the distribution's own streams (see reset): the worlds that enter the pool, and each episode's pick
-        self._world_rng: np.random.Generator | None = None
-        self._pick_rng: np.random.Generator | None = None
-        self._next_world: tuple[str, float] | None = None  # drawn for the next episode (being prefetched)
-        self._since_new = 0  # steps since the newest world of the pool entered it
-        self._pool: list[tuple[str, float]] = []  # the distribution's worlds (and suns) in play, oldest first
+        self.rotation = WorldRotation(config, self.worlds)  # which world each episode drives
         self._episode: Episode | None = None  # this episode's world, light and fog (None: the env's track)
         self._reduce = jpeg_reduction(self.contract)
 
     # --- the Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """A new episode; ``seed`` makes it and every step after it reproducible. ``options`` pin this episode's
-        draws (:data:`RESET_OPTIONS`): ``spawn_s`` (metres along the track to start at), ``cone_seed`` (the
-        cones' layout, with ``cones=N``), ``track`` or ``world_seed`` (the world; held-out ones only with
-        ``purpose="eval"``) and ``themes``, ``sun_deg``, ``light_intensity``, ``fog``."""
+        draws (:data:`tools.envs.reset_options.RESET_OPTIONS`): ``spawn_s`` (metres along the track to start at),
+        ``cone_seed`` (the cones' layout, with ``cones=N``), ``track`` or ``world_seed`` (the world; held-out ones
+        only with ``purpose="eval"``) and ``themes``, ``sun_deg``, ``light_intensity``, ``fog``."""
         pinned = check_reset_options(options, self.config.purpose)
         super().reset(seed=seed)
         self._closed = False
         run_seed = int(self.np_random.integers(1, 2**31 - 1))  # never 0: the simulator's "no spawn noise" seed
-        self._episode = episode = self._draw_episode(seed, pinned)
+        self._episode = episode = self.rotation.draw(seed, pinned, self.np_random)
         spawn_s = pinned.get("spawn_s")
         if spawn_s is None and self.config.spawn == "random":
             spawn_s = self.client.random_spawn_s(self.np_random, episode.built.path if episode else None)
@@ -183,7 +119,7 @@ class DriveEnv(gym.Env):
         self.client.start(run_seed, spawn_s=None if spawn_s is None else float(spawn_s),
                           spawn_noise=self.config.spawn_noise, cone_seed=int(pinned.get("cone_seed", 0)),
                           world=episode)
-        self._prefetch()
+        self.rotation.prefetch()
         self._pending = deque([SteerCommand(0.0, 0.0)] * self.config.action_delay)
         self._steps = 0
         if self._monitor_pipeline is not None:
@@ -205,11 +141,7 @@ class DriveEnv(gym.Env):
             command = self._pending.popleft()
         report = self.client.step(command, self.config.frames_per_step)
         self._steps += 1
-        worlds = self.config.worlds
-        if worlds is not None:
-            self._since_new += 1
-            if worlds.prefetch and self._next_world is None and 2 * self._since_new >= worlds.new_world_steps:
-                self._prefetch()  # halfway to a new world: build it in the background
+        self.rotation.stepped()  # halfway to a new world: built in the background
         terminated = bool(report.intervention) and self.config.terminate_on_takeover
         if report.intervention and not terminated:
             self.client.follow()  # observe the car where the referee put it: the next action drives from there
@@ -233,58 +165,6 @@ class DriveEnv(gym.Env):
         self.client.sim = None
         self.client.expert = None
         self._episode = None  # its world stays in the process's cache for the next environment
-
-    # --- the world of an episode --------------------------------------------------------------------
-    def _draw_episode(self, seed: int | None, pinned: dict[str, Any]) -> Episode | None:
-        """This episode's world: pinned by the options, drawn from the distribution's pool or None (the env's own
-        track, built as ``rbc sim`` builds it)."""
-        dist = self.config.worlds
-        if dist is not None and (seed is not None or self._world_rng is None):
-            # the worlds' own streams: the same worlds for a seed, whatever the episodes did with np_random
-            entropy = seed if seed is not None else int(self.np_random.integers(2**62))
-            self._world_rng = np.random.default_rng([entropy, WORLD_STREAM, 0])
-            self._pick_rng = np.random.default_rng([entropy, WORLD_STREAM, 1])
-            self._since_new, self._next_world = 0, None
-            self._pool = [dist.draw_world(self._world_rng) for _ in range(dist.pool)]
-        track, sun = pinned.get("track"), pinned.get("sun_deg")
-        if track is None and dist is not None:
-            assert self._world_rng is not None and self._pick_rng is not None  # seeded above
-            if self._since_new >= dist.new_world_steps:  # a new world, driven at once
-                self._pool = [*self._pool[1:], self._next_world or dist.draw_world(self._world_rng)]
-                self._next_world, self._since_new = None, 0
-                track, drawn_sun = self._pool[-1]
-            else:
-                track, drawn_sun = self._pool[int(self._pick_rng.integers(len(self._pool)))]
-            sun = drawn_sun if sun is None else sun
-        elif track is None:
-            if not {"sun_deg", "light_intensity", "fog"} & set(pinned):
-                return None
-            track = self.config.track_name
-        key = self._world_key(track, sun or 0.0, pinned.get("themes"), int(pinned.get("cone_seed", 0)))
-        return Episode(key, self.worlds.get(key), pinned.get("light_intensity", self.config.light_intensity),
-                       pinned.get("fog", 1.0))
-
-    def _world_key(self, track: str, sun: float, themes: tuple[str, ...] | None = None,
-                   cone_seed: int = 0) -> WorldKey:
-        from tools.sim.track.files import world_seed_of
-
-        if themes is None and self.config.worlds is not None:
-            themes = self.config.worlds.themes
-        return WorldKey(track, themes if world_seed_of(track) is not None else None, float(sun), self.config.cones,
-                        cone_seed)
-
-    def _prefetch(self) -> None:
-        """Build in the background the pool's worlds not built yet and, from halfway to ``new_world_steps``, the
-        world the next new-world reset brings into the pool (drawn now: the draws stay those of resets)."""
-        dist, rng = self.config.worlds, self._world_rng
-        if dist is None or not dist.prefetch or rng is None:
-            return
-        for track, sun in self._pool:
-            self.worlds.prefetch(self._world_key(track, sun))
-        if 2 * self._since_new >= dist.new_world_steps:
-            if self._next_world is None:
-                self._next_world = dist.draw_world(rng)
-            self.worlds.prefetch(self._world_key(*self._next_world))
 
     # --- what the agent gets ------------------------------------------------------------------------
     def command(self, action: ArrayLike) -> SteerCommand:
@@ -384,9 +264,9 @@ class DriveEnv(gym.Env):
         """(the monitor's pipeline, None until reset) for ``monitor=PATH``; one line if the file has none."""
         if path is None:
             return None, None
-        from drive_server.model import SteeringModel
-        from drive_server.monitor import MonitorMode, MonitorPolicy
-        from drive_server.pipeline import DriveConfig, DrivePipeline
+        from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
+        from drive_server.serving.model import SteeringModel
+        from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 
         pipeline = DrivePipeline(SteeringModel(Path(path)), DriveConfig(monitor=MonitorPolicy(MonitorMode.WARN,
                                                                                                    budget_ms=None)))
@@ -398,7 +278,7 @@ class DriveEnv(gym.Env):
     def _monitor_input(self, jpeg: bytes) -> np.ndarray:
         """The centre frame as drive_server would prepare it for the monitor's model (decoded from the wire's JPEG
         at the model's scale when there is one)."""
-        from drive_server.preprocess import preprocess
+        from drive_server.serving.preprocess import preprocess
         from protocol.jpeg import decode_jpeg
 
         pipeline = self._monitor_pipeline
