@@ -1,6 +1,6 @@
 """Figures written once: every results table is its record's rendering, and the pages hold to the site's rules.
 
-The Results page's tables are rendered from ``results/*.json`` (``tools/results.py``); a table edited by hand,
+The Results page's tables are rendered from ``results/*.json`` (the package ``tools/results/``); a table edited by hand,
 or a record changed without its page (``python -m tools.results write``), fails here. The user pages (all but
 the changelog and the experiments log) narrate no history, hold no table wider than 8 columns, and link
 neither to the development checkout's ``../shared`` nor to an issue; no page links to or names a docs page
@@ -275,7 +275,7 @@ def test_no_table_gives_a_rate_for_a_count_of_zero():
         for table, spec in results.load(name)["tables"].items():
             for column in spec["columns"]:
                 if "seconds_per_takeover" in column[1]:
-                    assert "per" in results._options(column), (name, table, column)
+                    assert "per" in results.column_options(column), (name, table, column)
 
 
 def _named_pages(page: Path, text: str) -> list[str]:
