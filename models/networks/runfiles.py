@@ -10,7 +10,7 @@ import json
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 from protocol.errors import BadValue, UserError
 from protocol.runrecords import write_json, write_text
@@ -69,6 +69,65 @@ class RunPaths:
         return self.run_dir / LOSS_PLOT
 
 
+class SplitRecord(TypedDict):
+    """How a run divided its samples (``models.data.split.SplitSpec``, its kind by name)."""
+
+    kind: str
+    val_fraction: float
+    block_frames: int
+    gap_frames: int
+
+
+class Resolved(TypedDict, total=False):
+    """The schedule and sample counts a run's configuration resolved to."""
+
+    epochs: int
+    steps_per_epoch: int
+    validation_steps: int
+    deletion_rate: float
+    optimizer: str
+    loss: str
+    train_samples: int
+    val_samples: int
+    zero_steer_train_samples: int
+    split: SplitRecord
+
+
+class LogEntry(TypedDict):
+    """One recording's log as training read it."""
+
+    path: str
+    rows: int
+    samples: int
+    skipped: int
+
+
+class ExportResult(TypedDict, total=False):
+    """What the export added to a run's record."""
+
+    export: str  # which epoch is exported: "best" or "last"
+    exported_epoch: int
+    val_mse: float
+    last_epoch_val_mse: float
+    val_metrics: dict[str, float]
+    split: str
+    rows: dict[str, int]
+    onnx_max_diff: float
+    val_by_recording: list[dict[str, object]]  # each recording's log and its metrics
+
+
+class ConfigRecord(TypedDict, total=False):
+    """``config.json`` as training writes it: the keys a reader reads (a record of an older run may lack some)."""
+
+    config: dict[str, Any]  # the run's TrainConfig as stored, read back by TrainConfig.from_dict (older keys too)
+    recipe: dict[str, dict[str, object]]  # the same settings, resolved, as a recipe file holds them
+    resolved: Resolved
+    rows: dict[str, int]
+    contract: dict[str, Any]  # the preprocessing contract's fields (of the run's version)
+    logs: list[LogEntry]
+    result: ExportResult
+
+
 @dataclass(frozen=True)
 class RunRecord:
     """What a training run recorded: its configuration record (what ``rbc train`` wrote before training and the
@@ -76,7 +135,7 @@ class RunRecord:
     properties name its parts, so no reader spells a key of it."""
 
     run_dir: Path
-    record: Mapping[str, Any]
+    record: ConfigRecord
     history: tuple[EpochRow, ...] = field(default=())
 
     @classmethod
@@ -100,7 +159,7 @@ class RunRecord:
             raise NotARunError(f"{where}: not a training run's config (a JSON {type(record).__name__})")
         if not isinstance(record.get("config"), dict):
             raise NotARunError(f"{where}: not a training run's config (its config is no JSON object)")
-        return cls(Path(run_dir), record, tuple(history))
+        return cls(Path(run_dir), cast(ConfigRecord, record), tuple(history))  # a JSON object with a config object
 
     @property
     def paths(self) -> RunPaths:
@@ -124,21 +183,22 @@ class RunRecord:
         return dict(self.record["config"])
 
     @property
-    def resolved(self) -> dict[str, Any]:
+    def resolved(self) -> Resolved:
         """The schedule and sample counts the configuration resolved to."""
-        return dict(self.record.get("resolved") or {})
+        found = self.record.get("resolved")
+        return found.copy() if found else {}
 
     @property
-    def recipe(self) -> dict[str, dict[str, Any]] | None:
+    def recipe(self) -> dict[str, dict[str, object]] | None:
         """The resolved recipe (None in a record written before records held it)."""
         return self.record.get("recipe")
 
     @property
-    def rows(self) -> dict[str, Any]:
+    def rows(self) -> dict[str, int]:
         return dict(self.record.get("rows") or {})
 
     @property
-    def logs(self) -> list[dict[str, Any]]:
+    def logs(self) -> list[LogEntry]:
         return list(self.record.get("logs") or [])
 
     @property
@@ -146,7 +206,7 @@ class RunRecord:
         return dict(self.record.get("contract") or {})
 
     @property
-    def result(self) -> dict[str, Any] | None:
+    def result(self) -> ExportResult | None:
         """What the export added (exported epoch, validation metrics ...); None until the run exported."""
         return self.record.get("result")
 
@@ -160,18 +220,18 @@ class RunRecord:
         return self.history[-1] if self.history else None
 
 
-def write_config(run_dir: Path, record: Mapping[str, Any]) -> None:
+def write_config(run_dir: Path, record: Mapping[str, object]) -> None:
     """Write the run's configuration record (before training)."""
     write_json(RunPaths(Path(run_dir)).config, dict(record))
 
 
-def write_result(run_dir: Path, result: Mapping[str, Any]) -> None:
+def write_result(run_dir: Path, result: Mapping[str, object]) -> None:
     """Add what the export found to the run's record."""
     run = RunRecord.load(run_dir)
     write_config(run.run_dir, {**run.record, "result": dict(result)})
 
 
-def write_history(run_dir: Path, rows: Iterable[EpochRow | Mapping[str, Any]]) -> None:
+def write_history(run_dir: Path, rows: Iterable[EpochRow | Mapping[str, object]]) -> None:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=HISTORY_FIELDS, lineterminator="\n")
     w.writeheader()
