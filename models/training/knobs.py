@@ -12,14 +12,22 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import Field, dataclass, field, fields
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from protocol.errors import BadValue
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+    #: A config dataclass, or an instance of one.
+    Config = DataclassInstance | type[DataclassInstance]
 
 #: A recipe's sections, in the order a recipe file lists them.
 SECTION_NAMES = ("data", "augmentation", "network", "training", "export")
 
 T = TypeVar("T")
+#: What a choice may be: a word or a whole number (a tuple of them: the values a key takes).
+Choice = str | int
 
 
 @dataclass(frozen=True)
@@ -45,7 +53,7 @@ class Range:
         return f"{self.low:g}..{self.high:g}{unit}"
 
 
-def knob(default: T, section: str, help: str, *, range: Range | None = None, choices: tuple[Any, ...] = ()) -> T:
+def knob(default: T, section: str, help: str, *, range: Range | None = None, choices: tuple[Choice, ...] = ()) -> T:
     """A config field that is a recipe key: its default, its section, what it is for, and its range or choices."""
     if section not in SECTION_NAMES:
         raise ValueError(f"knob section {section!r} is not one of {', '.join(SECTION_NAMES)}")
@@ -54,17 +62,17 @@ def knob(default: T, section: str, help: str, *, range: Range | None = None, cho
     return made
 
 
-def knob_fields(config: Any) -> list[Field[Any]]:
+def knob_fields(config: Config) -> list[Field[object]]:
     """The knobs of a config class (or instance), in declaration order."""
     return [f for f in fields(config) if "section" in f.metadata]
 
 
-def not_knobs(config: Any) -> tuple[str, ...]:
+def not_knobs(config: Config) -> tuple[str, ...]:
     """The fields of a config class that no recipe holds (the command line's)."""
     return tuple(f.name for f in fields(config) if "section" not in f.metadata)
 
 
-def describe(f: Field[Any]) -> str:
+def describe(f: Field[object]) -> str:
     """A knob's help with the values it takes: the comment above its key in a recipe ``rbc train --print`` writes,
     the help of a flag that overrides it."""
     meta = f.metadata
@@ -75,7 +83,7 @@ def describe(f: Field[Any]) -> str:
     return str(meta["help"])
 
 
-def sections(config: Any) -> dict[str, dict[str, str]]:
+def sections(config: Config) -> dict[str, dict[str, str]]:
     """Each recipe section of a config class and its keys, each with its help (:func:`describe`)."""
     found: dict[str, dict[str, str]] = {section: {} for section in SECTION_NAMES}
     for f in knob_fields(config):
@@ -83,12 +91,12 @@ def sections(config: Any) -> dict[str, dict[str, str]]:
     return {section: keys for section, keys in found.items() if keys}
 
 
-def choices(config: Any) -> dict[str, tuple[Any, ...]]:
+def choices(config: Config) -> dict[str, tuple[Choice, ...]]:
     """The keys whose value is one of a few words or numbers, with those."""
     return {f.name: f.metadata["choices"] for f in knob_fields(config) if f.metadata["choices"]}
 
 
-def check(config: Any) -> None:
+def check(config: DataclassInstance) -> None:
     """Every knob of ``config`` within its range and among its choices (None: the default's "none given"), else
     one line naming the key."""
     for f in knob_fields(config):
