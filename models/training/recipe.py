@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import tomllib
 import typing
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -60,13 +61,13 @@ def find_recipe(recipe: str) -> Path:
     return bundled[recipe]
 
 
-def read_recipe(path: Path) -> dict[str, Any]:
+def read_recipe(path: Path) -> dict[str, object]:
     """The TrainConfig fields a recipe file sets, each checked for its section, name, type and choices."""
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise BadValue(f"{path}: not valid TOML: {exc}") from None
-    values: dict[str, Any] = {}
+    values: dict[str, object] = {}
     for section, table in doc.items():
         if not isinstance(table, dict):
             raise BadValue(f"{path}: {section}: a key outside any section{_belongs(section)} "
@@ -104,13 +105,13 @@ def resolved(config: TrainConfig) -> TrainConfig:
                    max_steps_per_epoch=config.max_steps_per_epoch or 0)
 
 
-def recipe_sections(config: TrainConfig) -> dict[str, dict[str, Any]]:
+def recipe_sections(config: TrainConfig) -> dict[str, dict[str, object]]:
     """``config`` as a recipe, resolved: every key of every section (what the run record keeps)."""
     full = resolved(config)
     return {section: {key: _plain(getattr(full, key)) for key in keys} for section, keys in SECTIONS.items()}
 
 
-def renamed_sections(sections: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def renamed_sections(sections: Mapping[str, Mapping[str, object]]) -> dict[str, dict[str, object]]:
     """Recorded recipe ``sections`` (a run's record, a model file's) with their keys in today's names."""
     return {section: {RENAMED.get(k, k): v for k, v in keys.items()} for section, keys in sections.items()}
 
@@ -123,7 +124,7 @@ def recipe_toml(config: TrainConfig, source: str | None = None) -> str:
     return sections_toml(recipe_sections(config), header)
 
 
-def sections_toml(sections: dict[str, dict[str, Any]], header: list[str]) -> str:
+def sections_toml(sections: Mapping[str, Mapping[str, object]], header: list[str]) -> str:
     """A recipe file of resolved ``sections``: ``header`` as comments, then every key with what it is for."""
     lines = [f"# {line}" for line in header]
     lines.append("# Read back with rbc train --recipe FILE; --data, --val-data, --out and --threads stay on the "
@@ -135,7 +136,7 @@ def sections_toml(sections: dict[str, dict[str, Any]], header: list[str]) -> str
     return "\n".join(lines) + "\n"
 
 
-def run_recipe(run: RunRecord) -> dict[str, dict[str, Any]]:
+def run_recipe(run: RunRecord) -> dict[str, dict[str, object]]:
     """A run's recipe, resolved, from its record (one written before records held it: from its config)."""
     if run.recipe is not None:
         return renamed_sections(run.recipe)
@@ -165,7 +166,7 @@ def _belongs(key: str, section: str | None = None) -> str:
     return ""
 
 
-def _checked(path: Path, section: str, key: str, value: Any) -> Any:
+def _checked(path: Path, section: str, key: str, value: object) -> object:
     """``value`` if it has the field's type (an integer serves as a number) and is one of its choices."""
     kinds = tuple(t for t in typing.get_args(_TYPES[key]) or (_TYPES[key],) if t is not type(None))
     ok = isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
@@ -181,12 +182,12 @@ def _checked(path: Path, section: str, key: str, value: Any) -> Any:
     return value
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: object) -> object:
     """Enum members as their plain value, so the record and the TOML hold words."""
     return value.value if hasattr(value, "value") else value
 
 
-def _toml_value(value: Any) -> str:
+def _toml_value(value: object) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
