@@ -117,15 +117,21 @@ class ExportResult(TypedDict, total=False):
 
 
 class ConfigRecord(TypedDict, total=False):
-    """``config.json`` as training writes it: the keys a reader reads (a record of an older run may lack some)."""
+    """``config.json`` as training writes it (a record of an older run may lack some keys)."""
 
     config: dict[str, Any]  # the run's TrainConfig as stored, read back by TrainConfig.from_dict (older keys too)
     recipe: dict[str, dict[str, object]]  # the same settings, resolved, as a recipe file holds them
     resolved: Resolved
     rows: dict[str, int]
+    augment: dict[str, object]  # the augmentation's settings
     contract: dict[str, Any]  # the preprocessing contract's fields (of the run's version)
     logs: list[LogEntry]
-    result: ExportResult
+    unreadable_frames: int
+    code_version: str
+    torch: str  # its version
+    created: str  # when, ISO 8601 with the zone
+    world_size: int  # training processes (DDP)
+    result: ExportResult  # added after the export
 
 
 @dataclass(frozen=True)

@@ -4,20 +4,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict
-from typing import Any
-
 import torch
 
 from models.data.behavior import Pipeline
 from models.data.split import SplitKind
 from models.data.trainingdata import PreparedData
+from models.networks.runfiles import ConfigRecord
 from models.training.recipe import recipe_sections
 from models.training.train_config import TrainConfig
 from protocol import runrecords
 
 
 def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, epochs: int,
-                  steps: int, val_steps: int) -> dict[str, Any]:
+                  steps: int, val_steps: int) -> ConfigRecord:
+    split = data.split
     return {
         "config": asdict(config),
         "recipe": recipe_sections(config),  # the same settings, resolved, as a recipe file holds them
@@ -27,7 +27,8 @@ def config_record(config: TrainConfig, pipeline: Pipeline, data: PreparedData, e
             "deletion_rate": pipeline.deletion_rate, "optimizer": "Adam", "loss": "MSE",
             "train_samples": int(len(data.train)), "val_samples": int(len(data.val)),
             "zero_steer_train_samples": int((data.steering[data.train] == 0).sum()),
-            "split": asdict(data.split) | {"kind": SplitKind(data.split.kind).value},
+            "split": {"kind": SplitKind(split.kind).value, "val_fraction": split.val_fraction,
+                      "block_frames": split.block_frames, "gap_frames": split.gap_frames},
         },
         "rows": data.counts,
         "augment": asdict(pipeline.augment),
