@@ -15,15 +15,16 @@ from typing import TYPE_CHECKING
 
 import cv2
 
-from drive_server import listen
-from drive_server.control import ControlLaw
-from drive_server.guard import FallbackPolicy
-from drive_server.limits import WireLimits
-from drive_server.model import InferenceConfig, ModelError, SteeringModel
-from drive_server.models_dir import default_model_path
-from drive_server.monitor import MonitorError, MonitorMode, MonitorPolicy
-from drive_server.pipeline import DriveConfig
-from drive_server.server_config import ServerConfig
+from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
+from drive_server.serving.control import ControlLaw
+from drive_server.serving.guard import FallbackPolicy
+from drive_server.serving.model import InferenceConfig, ModelError, SteeringModel
+from drive_server.serving.models_dir import default_model_path
+from drive_server.serving.monitor import MonitorError
+from drive_server.serving.pipeline import DriveConfig
+from drive_server.wire import listen
+from drive_server.wire.limits import WireLimits
+from drive_server.wire.server_config import ServerConfig
 from protocol import SpeedUnit
 from protocol.errors import BadValue, UserError
 from protocol.helpformat import DefaultsHelpFormatter
@@ -186,9 +187,9 @@ def main(argv: list[str] | None = None) -> int:
     # one frame at a time: OpenCV's worker threads only add wake-up latency to a 160x80 resize
     cv2.setNumThreads(1)
     # imported only now: the model check above must not pay for (or print anything from) eventlet
-    from drive_server.pipeline import DrivePipeline
-    from drive_server.server import DriveServer
-    from drive_server.transport import TransportTuning
+    from drive_server.serving.pipeline import DrivePipeline
+    from drive_server.wire.server import DriveServer
+    from drive_server.wire.transport import TransportTuning
 
     tuning = TransportTuning.stock() if args.stock_transport else TransportTuning()
     config = ServerConfig(host=args.host, port=args.port, log_every_s=args.log_every, stats_json=args.stats_json,
@@ -212,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     if not listen.is_local(sock.getsockname()[0]):
         log.warning(listen.EXPOSED_WARNING, listen.url(sock).removeprefix("http://"))
     if args.workers > 1:
-        from drive_server.workers import serve_workers
+        from drive_server.wire.workers import serve_workers
 
         def make_server(worker_config: ServerConfig) -> DriveServer:  # runs in each worker, after the fork
             return DriveServer(DrivePipeline(SteeringModel(model_path, inference), drive), worker_config)
@@ -220,11 +221,11 @@ def main(argv: list[str] | None = None) -> int:
         return serve_workers(args.workers, sock, model, config, make_server, tuning)
     try:
         server = DriveServer(DrivePipeline(model, drive), config)
-    except UserError as exc:  # e.g. a patched library internal gone after an upgrade (drive_server.patches)
+    except UserError as exc:  # e.g. a patched library internal gone after an upgrade (drive_server.wire.patches)
         return fail(exc)
     server.adopt(sock)
     if args.record is not None:
-        from drive_server.recorder import Recorder
+        from drive_server.observing.recorder import Recorder
 
         server.recorder = Recorder(args.record)
     try:

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from drive_server.models_dir import demo_model_path
+from drive_server.serving.models_dir import demo_model_path
 from tests.conftest import write_stadium
 from tools.evaluate.runner import DriverSpec, Runner, Task, record_key, run_task
 from tools.evaluate.suite import SuiteConfig, run_suite

@@ -11,8 +11,9 @@ STUBS = {
     "protocol/__init__.py": "",
     "protocol/facts.py": "MAX_STEERING_DEG = 25.0\n",
     "drive_server/__init__.py": "",
-    "drive_server/pipeline.py": "from protocol.facts import MAX_STEERING_DEG\n",
-    "drive_server/static/dashboard.js": "let page = 1;\n",
+    "drive_server/serving/__init__.py": "",
+    "drive_server/serving/pipeline.py": "from protocol.facts import MAX_STEERING_DEG\n",
+    "drive_server/observing/static/dashboard.js": "let page = 1;\n",
     "models/__init__.py": "",
     "models/data/__init__.py": "",
     "models/data/labels.py": "LAG = 0\n",
@@ -32,7 +33,7 @@ STUBS = {
     "tools/evaluate/__init__.py": "",
     "tools/evaluate/offline.py": (
         "from models.data import labels\nfrom models.training.metrics import pearson_r\n"
-        "from ..sim.driving import rules  # degree_of_autonomy\nimport drive_server.pipeline\n"),
+        "from ..sim.driving import rules  # degree_of_autonomy\nimport drive_server.serving.pipeline\n"),
     "tools/evaluate/runner.py": "def run_task(t=0):\n    from tools.sim.driving.session import run_scenario\n",
     "tools/sim/__init__.py": "",
     "tools/sim/driving/__init__.py": "",

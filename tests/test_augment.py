@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT
-from drive_server.preprocess import frame_to_network_image
+from drive_server.serving.contract import NVIDIA_CONTRACT, PAPER_CONTRACT
+from drive_server.serving.preprocess import frame_to_network_image
 from models.augmentation import augment, geometry, reference
 from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, draw_params
 from models.augmentation.fastaug import FastAugmenter, augment_batch

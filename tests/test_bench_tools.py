@@ -14,7 +14,7 @@ from tools.wire.server_process import ServerProcess
 onnx = pytest.importorskip("onnx", reason="the benchmark models are built with the onnx package")
 ort = pytest.importorskip("onnxruntime")
 
-from drive_server.contract import METADATA_KEY, PreprocessContract  # noqa: E402
+from drive_server.serving.contract import METADATA_KEY, PreprocessContract  # noqa: E402
 from models.networks.architectures import PILOTNET, SHALLOW, SHALLOW_WIDE  # noqa: E402
 from tools.bench.onnx_builders import ARCHS, build_model, count_parameters  # noqa: E402
 

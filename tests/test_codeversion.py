@@ -18,10 +18,10 @@ def test_the_closure_follows_imports_in_functions_relative_ones_and_packages_but
         tmp_path: Path) -> None:
     root = write_tree(tmp_path)
     assert module_closure([ENTRY], root) == sorted([
-        "drive_server", "drive_server.pipeline", "models", "models.data", "models.data.labels", "models.training",
-        "models.training.metrics", "protocol", "protocol.facts", "tools", "tools.evaluate", "tools.evaluate.offline",
-        "tools.realdata", "tools.realdata.crossval", "tools.realdata.recordings", "tools.sim", "tools.sim.driving",
-        "tools.sim.driving.rules"])
+        "drive_server", "drive_server.serving", "drive_server.serving.pipeline", "models", "models.data",
+        "models.data.labels", "models.training", "models.training.metrics", "protocol", "protocol.facts", "tools",
+        "tools.evaluate", "tools.evaluate.offline", "tools.realdata", "tools.realdata.crossval",
+        "tools.realdata.recordings", "tools.sim", "tools.sim.driving", "tools.sim.driving.rules"])
     assert module_closure(["tools.evaluate.runner"], root)[:2] == ["tools", "tools.evaluate"]  # its own package
     assert set(code_version(ENTRY, root=root).libraries) == {"numpy"}
     with pytest.raises(ValueError, match="no module tools.nowhere"):
@@ -42,7 +42,7 @@ def test_a_change_to_any_module_reached_or_the_data_beside_it_changes_the_versio
     ("models/training/train.py", "import torch\n"),  # not reached from the scorer
     ("tools/drivelog/loop.py", "class LoopRules:\n    x = 1\n"),  # only under TYPE_CHECKING
     ("docs/page.md", "another page\n"),
-    ("drive_server/static/dashboard.js", "let page = 2;\n"),  # a web page's assets are no data
+    ("drive_server/observing/static/dashboard.js", "let page = 2;\n"),  # a web page's assets are no data
     ("tools/evaluate/offline.py", STUBS["tools/evaluate/offline.py"] + "\n# a comment\n\n"),
     ("tools/realdata/crossval.py", STUBS["tools/realdata/crossval.py"].replace("Score one.", "Score one recording.")),
 ])

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from drive_server.control import ControlLaw
-from drive_server.guard import FallbackPolicy, FrameGuard
+from drive_server.serving.control import ControlLaw
+from drive_server.serving.guard import FallbackPolicy, FrameGuard
 from protocol import KMH_PER_MPH, SteerCommand
 
 V_L, DELTA = 25.0, 25.0
@@ -58,7 +58,7 @@ def test_one_law_nested_in_every_config_with_the_steering_conversion():
     caller turned normalised steering into degrees by hand."""
     from dataclasses import fields
 
-    from drive_server.pipeline import DriveConfig
+    from drive_server.serving.pipeline import DriveConfig
 
     law = ControlLaw(speed_limit_kmh=30.0, steer_limit_deg=20.0, tau=0.5)
     assert law.steering_deg(0.5) == pytest.approx(10.0) and law.steering_deg(-1.0) == -20.0
@@ -71,8 +71,8 @@ def test_pipeline_converts_mph_and_normalised_steering(tmp_path):
     pytest.importorskip("onnx")
     from helpers_server import build_shallow
 
-    from drive_server.model import SteeringModel
-    from drive_server.pipeline import DriveConfig, DrivePipeline
+    from drive_server.serving.model import SteeringModel
+    from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 
     model = SteeringModel(build_shallow(tmp_path / "m.onnx"))
     mph = DrivePipeline(model, DriveConfig(speed_unit="mph"))

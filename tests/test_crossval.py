@@ -151,7 +151,8 @@ def test_the_journal_key_covers_the_code_the_scorer_imports_and_nothing_else(tmp
         edit(root, name, "CHANGED = 1\n")
         assert crossval.measure_version(root) == version, name
     for name in ("tools/evaluate/offline.py", "models/data/labels.py", "models/training/metrics.py",
-                 "tools/sim/driving/rules.py", "drive_server/pipeline.py", "tools/realdata/public_recordings.csv"):
+                 "tools/sim/driving/rules.py", "drive_server/serving/pipeline.py",
+                 "tools/realdata/public_recordings.csv"):
         edit(root, name, STUBS[name] + "\nCHANGED = 1\n")
         assert crossval.measure_version(root) != version, name
         version = crossval.measure_version(root)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import queue
 
-from drive_server.dashboard import Dashboard, DashboardConfig
+from drive_server.observing.dashboard import Dashboard, DashboardConfig
 
 
 class _Queue(queue.Queue):

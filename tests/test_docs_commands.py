@@ -392,7 +392,7 @@ def test_drive_the_udacity_simulator(workspace, capsys):
         expected = re.sub(r"^\S+ ", "", line).split("http://")[0]
         for part in expected.split("..."):  # a line trimmed at "..."
             assert part.strip() in log, part
-    shown = output_block("unity.md", "02:36:56 INFO drive_server.unity_compat")
+    shown = output_block("unity.md", "02:36:56 INFO drive_server.wire.unity_compat")
     assert "sent an event without a CONNECT packet (the Unity simulator does that): joined it to '/'" in log
     assert "(websocket-sharp/1.0); 1 connected" in log and len(shown) == 2
     rows = (workspace["dir"] / "runs" / "drive1" / "driving_log.csv").read_text().splitlines()

@@ -344,7 +344,7 @@ def test_a_model_with_a_monitor_says_which_take_overs_it_foresaw(tmp_path: Path,
     from helpers_server import build_shallow
     from test_monitor import _brightness_graph, _with_monitor
 
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
 
     model = _with_monitor(build_shallow(tmp_path / "m.onnx", seed=3), tmp_path / "mon.onnx",
                           MonitorSpec("brightness", -0.5, 0.5, 3), _brightness_graph())

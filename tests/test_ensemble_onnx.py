@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from helpers_server import build_shallow
 
-from drive_server.contract import METADATA_MODEL_INFO_KEY
-from drive_server.model import SteeringModel
+from drive_server.serving.contract import METADATA_MODEL_INFO_KEY
+from drive_server.serving.model import SteeringModel
 from tools.cli import main as rbc
 
 ort = pytest.importorskip("onnxruntime")

@@ -13,8 +13,8 @@ import pytest
 
 gym = pytest.importorskip("gymnasium", reason="the gym extra is not installed (pip install -e '.[gym]')")
 
-from drive_server.model import SteeringModel  # noqa: E402
-from drive_server.pipeline import DriveConfig, DrivePipeline  # noqa: E402
+from drive_server.serving.model import SteeringModel  # noqa: E402
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline  # noqa: E402
 from protocol import SpeedUnit, Telemetry  # noqa: E402
 from protocol.errors import BadValue  # noqa: E402
 from protocol.jpeg import decode_jpeg  # noqa: E402
@@ -187,7 +187,7 @@ def test_the_control_law_is_one_argument_shared_with_drive_server():
     """Issue 51: speed_limit_kmh, steer_limit_deg and tau were copies of drive_server's ControlLaw's fields."""
     from dataclasses import fields
 
-    from drive_server.control import ControlLaw
+    from drive_server.serving.control import ControlLaw
     from tools.envs.config import DriveEnvConfig
 
     assert not {f.name for f in fields(ControlLaw)} & {f.name for f in fields(DriveEnvConfig)}
@@ -523,7 +523,7 @@ def test_the_env_scores_each_observation_with_a_models_monitor(tmp_path):
     from helpers_server import build_shallow
     from test_monitor import _brightness_graph, _with_monitor
 
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
     from protocol.errors import UserError
 
     plain = build_shallow(tmp_path / "m.onnx")

@@ -49,7 +49,7 @@ WORLDS_CONFIG = '{"min_length_m": 200, "max_length_m": 400, "drive_check": false
 
 def test_unseen_worlds_over_the_socket_two_tiny_worlds(tmp_path):
     """The experiment beyond the paper: two generated evaluation worlds, the bundled model on the real server."""
-    from drive_server.models_dir import demo_model_path
+    from drive_server.serving.models_dir import demo_model_path
 
     out = tmp_path / "eval"
     with ServerProcess(demo_model_path(), ["--log-every", "0"]) as server:

@@ -88,7 +88,7 @@ def test_worlds_come_from_the_evaluation_range_and_are_recorded(tmp_path):
 
 def test_the_world_document_travels_with_the_task(tmp_path):
     """A worker without the track file (a Ray node elsewhere) writes it where the run expects it."""
-    from drive_server.models_dir import demo_model_path
+    from drive_server.serving.models_dir import demo_model_path
 
     path = write_eval_worlds(tmp_path, [1_000_001], SHORT, resume=False)["files"][1_000_001]
     doc = json.loads(Path(path).read_text())

@@ -216,7 +216,7 @@ def test_train_stops_on_a_full_disk_keeps_its_last_checkpoint_and_resume_ends_as
 # ------------------------------------------------------------------------------------------------ rbc eval
 def test_eval_stops_on_a_full_disk_keeps_whole_journal_lines_and_resume_gives_the_clean_table(small_disk,
                                                                                              tmp_path, capsys):
-    from drive_server.models_dir import demo_model_path
+    from drive_server.serving.models_dir import demo_model_path
 
     track = write_stadium(tmp_path, straight=60.0, radius=30.0, road_width=10.0)
     flags = ["eval", "--model", str(demo_model_path()), "--track", track, "--experiments", "no_variation",

@@ -12,7 +12,7 @@ import pytest
 from helpers_server import SAMPLE_LOG, build_shallow, run_server_cli
 from test_hostile_model import dynamic_mean_graph
 
-from drive_server.contract import PAPER_CONTRACT
+from drive_server.serving.contract import PAPER_CONTRACT
 from protocol import SteerCommand
 from tools.wire.frames import log_frames
 from tools.wire.server_process import ServerProcess

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from drive_server.models_dir import demo_model_path
+from drive_server.serving.models_dir import demo_model_path
 from tests.conftest import write_stadium
 from tools.evaluate.runner import read_journal
 

@@ -1,4 +1,4 @@
-"""The packet checks and the rate-limited fault log of ``drive_server.limits``, without a server."""
+"""The packet checks and the rate-limited fault log of ``drive_server.wire.limits``, without a server."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import logging
 
 import pytest
 
-from drive_server.limits import FaultLog, WireLimits, close_reason, json_problem, packet_problem
-from drive_server.stats import FaultCounters
+from drive_server.observing.stats import FaultCounters
+from drive_server.wire.limits import FaultLog, WireLimits, close_reason, json_problem, packet_problem
 
 TELEMETRY = '42["telemetry",' + json.dumps({"steering_angle": "-3,1250", "throttle": "0.2", "speed": "9",
                                             "image": "/9j/" + "A" * 20000}) + "]"
@@ -43,7 +43,7 @@ def test_escaped_strings_are_skipped_too():
 def test_fault_log_writes_one_line_per_kind_and_interval(caplog):
     counters = FaultCounters()
     faults = FaultLog(counters, interval_s=3600)
-    with caplog.at_level(logging.WARNING, logger="drive_server.limits"):
+    with caplog.at_level(logging.WARNING, logger="drive_server.wire.limits"):
         for _ in range(1000):
             faults.report("protocol_error", "bad %s", "thing")
         faults.report("refused", "full")
@@ -51,7 +51,7 @@ def test_fault_log_writes_one_line_per_kind_and_interval(caplog):
     assert len(caplog.records) == 3
     assert counters.as_dict() == {"protocol_error": 1000, "refused": 1}
     faults._last.clear()
-    with caplog.at_level(logging.WARNING, logger="drive_server.limits"):
+    with caplog.at_level(logging.WARNING, logger="drive_server.wire.limits"):
         faults.report("protocol_error", "bad again")
     assert "[999 more like it not logged]" in caplog.records[-1].getMessage()
 
@@ -69,12 +69,12 @@ def test_limits_are_checked(kwargs):
 
 def test_a_burst_allows_that_many_lines_per_interval_at_the_given_level(caplog):
     events = FaultLog(FaultCounters(), interval_s=3600, level=logging.INFO, burst=3)
-    with caplog.at_level(logging.INFO, logger="drive_server.limits"):
+    with caplog.at_level(logging.INFO, logger="drive_server.wire.limits"):
         for i in range(10):
             events.report("connect", "client %d", i, count=False)
     assert [r.getMessage() for r in caplog.records] == ["client 0", "client 1", "client 2"]
     assert {r.levelno for r in caplog.records} == {logging.INFO} and not events.counters.as_dict()
     events._last.clear()  # the next interval
-    with caplog.at_level(logging.INFO, logger="drive_server.limits"):
+    with caplog.at_level(logging.INFO, logger="drive_server.wire.limits"):
         events.report("connect", "client %d", 10, count=False)
     assert caplog.records[-1].getMessage() == "client 10 [7 more like it not logged]"

@@ -13,7 +13,7 @@ import onnx  # noqa: E402
 from onnx import TensorProto, helper  # noqa: E402
 
 from drive_server import cli  # noqa: E402
-from drive_server.contract import METADATA_KEY, PAPER_CONTRACT, ContractError, PreprocessContract  # noqa: E402
+from drive_server.serving.contract import METADATA_KEY, PAPER_CONTRACT, ContractError, PreprocessContract  # noqa: E402
 
 
 def with_contract(src, dst, **changes):
@@ -60,7 +60,7 @@ def base_model(tmp_path_factory):
 @pytest.fixture
 def never_serve(monkeypatch):
     """Fail instead of serving forever if a bad model gets through the startup checks."""
-    from drive_server import server
+    from drive_server.wire import server
 
     def refuse(self, *_, **__):
         raise AssertionError("the server started with a model that should have been refused")

@@ -137,8 +137,8 @@ class _Pipeline:
                                              ("telemetry", "payload"), ("", "payload")])
 def test_the_server_counts_a_reworded_protocol_error_by_its_field(monkeypatch, field, kind):
     """Issue 51: rewording a message changed the counters (the kind was the text before its first ':')."""
-    import drive_server.server as server_module
-    from drive_server.server import DriveServer, ServerConfig
+    import drive_server.wire.server as server_module
+    from drive_server.wire.server import DriveServer, ServerConfig
 
     def reworded(payload):
         raise ProtocolError("could not read this frame: the value is garbled", field=field)

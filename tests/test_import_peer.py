@@ -21,9 +21,9 @@ pytest.importorskip("onnx", reason="rbc import-peer needs the train extra (torch
 import cv2  # noqa: E402
 import onnxruntime as ort  # noqa: E402
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract  # noqa: E402
-from drive_server.model import SteeringModel  # noqa: E402
-from drive_server.pipeline import DrivePipeline  # noqa: E402
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract  # noqa: E402
+from drive_server.serving.model import SteeringModel  # noqa: E402
+from drive_server.serving.pipeline import DrivePipeline  # noqa: E402
 from protocol.datalog import read_log  # noqa: E402
 from protocol.jpeg import read_jpeg_file  # noqa: E402
 from tools.cli import main  # noqa: E402

@@ -13,8 +13,8 @@ from typing import Any
 
 import pytest
 
-from drive_server.serving import check_gain
-from drive_server.smoothing import check_alpha
+from drive_server.serving.settings import check_gain
+from drive_server.serving.smoothing import check_alpha
 from models.augmentation.augment import AugmentSpec
 from models.data.split import SplitSpec
 from models.data.trainingdata import DataOptions

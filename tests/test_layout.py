@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT
-from drive_server.preprocess import jpeg_reduction, preprocess, to_input_tensor
+from drive_server.serving.contract import NVIDIA_CONTRACT, PAPER_CONTRACT
+from drive_server.serving.preprocess import jpeg_reduction, preprocess, to_input_tensor
 from protocol import decode_image
 from protocol.datalog import read_log
 from tools.cli import SUBCOMMANDS, find_subcommand, load, main, subcommand_parser
@@ -77,28 +77,60 @@ def test_the_simulator_never_imports_models():
     assert _violations("tools.sim", ("models", "torch")) == []
 
 
-def test_the_simulators_sub_packages_import_only_along_their_arrows():
-    from tools.sim import ALLOWED_IMPORTS
-
-    packages = {p.name for p in (REPO / "tools" / "sim").iterdir() if (p / "__init__.py").exists()}
-    assert packages == set(ALLOWED_IMPORTS), "every sub-package has its arrows in tools.sim.ALLOWED_IMPORTS"
+def _off_the_arrows(top: str, allowed: dict[str, frozenset[str]], modules: dict[str, Path]) -> list[str]:
+    """``module imports target`` for each import from one sub-package of ``top`` into another that its arrows
+    (``allowed``: sub-package -> the sub-packages it may import) do not allow."""
+    depth = len(top.split("."))
     wrong = []
-    for name, path in MODULES.items():
+    for name, path in modules.items():
         parts = name.split(".")
-        if parts[:2] != ["tools", "sim"] or len(parts) < 3 or parts[2] not in ALLOWED_IMPORTS:
+        if not name.startswith(top + ".") or len(parts) <= depth or parts[depth] not in allowed:
             continue
         for imp in _imports(path):
             target = imp.split(".")
-            outside = target[:2] == ["tools", "sim"] and len(target) > 2 and target[2] != parts[2]
-            if outside and target[2] not in ALLOWED_IMPORTS[parts[2]]:
+            outside = imp.startswith(top + ".") and len(target) > depth and target[depth] != parts[depth]
+            if outside and target[depth] not in allowed[parts[depth]]:
                 wrong.append(f"{name} imports {imp}")
-    assert wrong == []
+    return sorted(wrong)
 
 
-def test_no_module_sits_loose_in_the_simulator_and_no_room_is_crowded():
-    sim = REPO / "tools" / "sim"
-    assert sorted(p.name for p in sim.glob("*.py")) == ["__init__.py"]
-    for package in (p for p in sim.iterdir() if (p / "__init__.py").exists()):
+#: Packages of one sub-package per job, whose arrows (``ALLOWED_IMPORTS`` in the package) a test checks, and the
+#: modules that may sit beside the sub-packages: drive_server's command line sits on top of its three rooms.
+ROOMED = {"tools.sim": [], "drive_server": ["__main__.py", "cli.py"]}
+
+
+@pytest.mark.parametrize("top", sorted(ROOMED))
+def test_the_sub_packages_import_only_along_their_arrows(top):
+    """Issue 51: drive_server's 27 modules sat in one folder; now serving, observing and wire, like the simulator's
+    rooms, each import only the rooms their arrows name."""
+    import importlib
+
+    allowed = importlib.import_module(top).ALLOWED_IMPORTS
+    folder = REPO.joinpath(*top.split("."))
+    packages = {p.name for p in folder.iterdir() if (p / "__init__.py").exists()}
+    assert packages == set(allowed), f"every sub-package has its arrows in {top}.ALLOWED_IMPORTS"
+    assert _off_the_arrows(top, allowed, MODULES) == []
+
+
+def test_the_arrows_check_finds_an_import_against_an_arrow(tmp_path):
+    upward = tmp_path / "upward.py"
+    upward.write_text("from drive_server.serving.model import SteeringModel\n"
+                      "def f():\n    from drive_server.wire import server\n")
+    sideways = tmp_path / "sideways.py"
+    sideways.write_text("import drive_server.observing.stats\nfrom drive_server.serving import guard\n")
+    allowed = {"serving": frozenset(), "observing": frozenset({"serving"}), "wire": frozenset({"serving"})}
+    modules = {"drive_server.serving.upward": upward, "drive_server.wire.sideways": sideways}
+    assert _off_the_arrows("drive_server", allowed, modules) == [  # its own room and an allowed one are no finding
+        "drive_server.serving.upward imports drive_server.wire",
+        "drive_server.serving.upward imports drive_server.wire.server",
+        "drive_server.wire.sideways imports drive_server.observing.stats"]
+
+
+@pytest.mark.parametrize("top", sorted(ROOMED))
+def test_no_module_sits_loose_beside_the_rooms_and_no_room_is_crowded(top):
+    folder = REPO.joinpath(*top.split("."))
+    assert sorted(p.name for p in folder.glob("*.py")) == sorted(["__init__.py", *ROOMED[top]])
+    for package in (p for p in folder.iterdir() if (p / "__init__.py").exists()):
         assert len([m for m in package.glob("*.py") if m.name != "__init__.py"]) <= 15, package.name
 
 
@@ -108,14 +140,15 @@ def test_models_never_import_tools():
 
 #: The drive_server modules that are the serving contract: what a model file is and carries for drive_server to serve
 #: it as it was trained and measured. models writes and checks its files against these, so the two cannot drift;
-#: every other drive_server module (the wire, the workers, observing) is the server's own and models never needs it.
+#: every other drive_server module (the rest of serving: the pipeline, the control law, the monitor at run time; the
+#: wire; observing) is the server's own and models never needs it.
 SERVING_CONTRACT = {
-    "drive_server.contract": "the preprocessing contract and the ONNX metadata keys it travels under",
-    "drive_server.preprocess": "THE preprocessing function: training feeds the network the pixels serving does",
-    "drive_server.smoothing": "the steering smoothing's name and range that a model asks for",
-    "drive_server.serving": "how a model asks to be served (rbc.serving: its gain and smoothing)",
-    "drive_server.monitor": "the monitor's spec, metadata keys and one-second window that a model file carries",
-    "drive_server.model": "the server's model loader: the monitor's fit and attach read a model back as it is served",
+    "drive_server.serving.contract": "the preprocessing contract and the ONNX metadata keys it travels under",
+    "drive_server.serving.preprocess": "THE preprocessing function: training feeds the network the pixels serving does",
+    "drive_server.serving.smoothing": "the steering smoothing's name and range that a model asks for",
+    "drive_server.serving.settings": "how a model asks to be served (rbc.serving: its gain and smoothing)",
+    "drive_server.serving.monitor": "the monitor's spec, metadata keys, graph and one-second window in a model file",
+    "drive_server.serving.model": "the server's model loader: the monitor's fit and attach read a model back as served",
 }
 
 
@@ -136,11 +169,13 @@ def test_models_import_of_drive_server_only_the_serving_contract():
 
 def test_the_serving_contract_check_finds_another_drive_server_import(tmp_path):
     module = tmp_path / "leaning.py"
-    module.write_text("from drive_server.contract import PreprocessContract\nimport drive_server.stats\n"
-                      "def f():\n    from drive_server import server\n")
+    module.write_text("from drive_server.serving.contract import PreprocessContract\n"
+                      "import drive_server.observing.stats\nfrom drive_server.serving import pipeline\n"
+                      "def f():\n    from drive_server.wire import server\n")
     assert _outside_the_serving_contract({"models.leaning": module}) == [
-        "models.leaning imports drive_server", "models.leaning imports drive_server.server",
-        "models.leaning imports drive_server.stats"]
+        "models.leaning imports drive_server.observing.stats", "models.leaning imports drive_server.serving",
+        "models.leaning imports drive_server.serving.pipeline", "models.leaning imports drive_server.wire",
+        "models.leaning imports drive_server.wire.server"]
 
 
 def test_command_modules_hold_no_library_code_and_do_not_import_each_other():
@@ -284,11 +319,12 @@ def test_the_package_cycle_check_sees_a_cycle():
     assert "tools.drivelog" in _package_graph()["tools.realdata"]  # rbc data crossval drives through drivelog
 
 
-def test_no_folder_of_models_or_tools_holds_more_than_15_modules():
+def test_no_folder_of_drive_server_models_or_tools_holds_more_than_15_modules():
     """A room with more than 15 modules holds more than one job. tools/commands is the exception by design: one
-    module per rbc subcommand (test_command_modules_hold_no_library_code_and_do_not_import_each_other)."""
+    module per rbc subcommand (test_command_modules_hold_no_library_code_and_do_not_import_each_other). Issue 51:
+    drive_server held 25 modules in one folder (the wire, serving and observing side by side)."""
     crowded = {}
-    for root in ("models", "tools"):
+    for root in ("drive_server", "models", "tools"):
         for folder in [REPO / root, *(p for p in (REPO / root).rglob("*") if p.is_dir())]:
             count = len([m for m in folder.glob("*.py") if m.name != "__init__.py"])
             if count > 15 and folder != REPO / "tools" / "commands":
@@ -471,7 +507,7 @@ def test_centre_is_spelt_one_way_where_no_format_says_center():
                 names.append(node.target.id)
             found |= {(path.relative_to(REPO).as_posix(), n) for n in names if "center" in n.lower()}
     assert found - CENTER_BY_FORMAT == set()
-    static = REPO / "drive_server" / "static"
+    static = REPO / "drive_server" / "observing" / "static"
     assert not [p.name for p in static.iterdir() if p.suffix in (".html", ".css", ".js")
                 and "center" in p.read_text(encoding="utf-8")]
 

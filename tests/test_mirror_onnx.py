@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from helpers_server import build_shallow
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
-from drive_server.model import SteeringModel
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
+from drive_server.serving.model import SteeringModel
 from tools.cli import main as rbc
 
 ort = pytest.importorskip("onnxruntime")
@@ -74,7 +74,7 @@ def test_a_model_trained_elsewhere_is_mirrored_with_a_serving_gain_as_rbc_train_
     """``--gain G``: the graph answers (f(x) - f(mirror x)) / 2 and the file asks drive_server for G, as a recipe's
     ``[export] gain``; served through the pipeline, the answer is G times the average (the old ``--output-scale``
     spelling gives the same file). A gain the source asks for is kept."""
-    from drive_server.pipeline import DriveConfig, DrivePipeline
+    from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 
     original = build_shallow(tmp_path / "m.onnx", seed=3)
     plain, gained, old = tmp_path / "plain.onnx", tmp_path / "gained.onnx", tmp_path / "old.onnx"

@@ -13,21 +13,17 @@ import numpy as np
 import pytest
 from helpers_server import SAMPLE_LOG, build_shallow, run_server_cli
 
-from drive_server.model import SteeringModel
-from drive_server.monitor import (
-    MONITOR_GRAPH_KEY,
-    MONITOR_KEY,
+from drive_server.serving.client_monitor import (
     ClientMonitor,
     Level,
-    MonitorError,
     MonitorMode,
     MonitorPolicy,
-    MonitorSpec,
     MonitorState,
     at_frame_rate,
-    encode_graph,
 )
-from drive_server.pipeline import DriveConfig, DrivePipeline
+from drive_server.serving.model import SteeringModel
+from drive_server.serving.monitor import MONITOR_GRAPH_KEY, MONITOR_KEY, MonitorError, MonitorSpec, encode_graph
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 from protocol import parse_telemetry
 from tools.wire.frames import log_frames
 
@@ -86,7 +82,7 @@ def test_a_single_spike_below_the_window_mean_raises_nothing():
 
 
 def test_a_non_finite_score_is_a_fault_not_a_state():
-    from drive_server.monitor import MonitorFault
+    from drive_server.serving.client_monitor import MonitorFault
 
     with pytest.raises(MonitorFault):
         MonitorState(SPEC).update(math.nan)
@@ -176,7 +172,7 @@ def test_act_brakes_on_an_alarm_and_never_changes_steering(models):
 
 def test_act_slows_on_a_warning_through_the_control_law(models):
     pipeline = DrivePipeline(SteeringModel(models["calm"]), DriveConfig(monitor=MonitorPolicy(mode=MonitorMode.ACT)))
-    from drive_server.monitor import MonitorReading
+    from drive_server.serving.client_monitor import MonitorReading
 
     normal = pipeline.control(0.1, 10.0, MonitorReading(0, 0, Level.NORMAL))
     slowed = pipeline.control(0.1, 10.0, MonitorReading(0, 0, Level.WARNING))
@@ -201,7 +197,7 @@ def test_a_monitor_that_fails_leaves_steering_untouched_and_is_reported_once(mod
     pipeline = DrivePipeline(SteeringModel(models["calm"]), DriveConfig(monitor=MonitorPolicy(mode=MonitorMode.ACT)))
     reference = _drive(models["plain"], "off", n=6)
     monitor = ClientMonitor(_Broken(how), SPEC, MonitorPolicy(mode=MonitorMode.ACT, budget_ms=1.0, strikes=2), "c1")
-    with caplog.at_level(logging.WARNING, logger="drive_server.monitor"):
+    with caplog.at_level(logging.WARNING, logger="drive_server.serving.client_monitor"):
         commands = [pipeline.run(parse_telemetry(f.payload()), pipeline.smoother(), monitor)[0] for f in FRAMES[:6]]
     assert commands == [c for c, _ in reference]
     assert monitor.failed and monitor.last is None
@@ -223,7 +219,7 @@ def test_a_broken_monitor_is_one_line_and_off_still_serves(models, tmp_path):
 
 
 def test_the_recording_gets_the_monitor_beside_the_unchanged_log(models, tmp_path):
-    from drive_server.recorder import MONITOR_LOG, Recorder
+    from drive_server.observing.recorder import MONITOR_LOG, Recorder
     from protocol.datalog import read_log
 
     rec = Recorder(tmp_path / "rec")

@@ -76,7 +76,7 @@ def test_a_tiny_benchmark_drives_scores_resumes_and_records(tmp_path):
     from helpers_server import build_shallow
     from test_monitor import _brightness_graph, _with_monitor
 
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
     from tools.monitoreval import runner
     from tools.monitoreval.report import closed_loop, compare, figures, tables
     from tools.monitoreval.runset import RunSpec
@@ -129,7 +129,7 @@ def test_rbc_sim_sums_up_the_monitor_and_draws_its_score(tmp_path):
     from helpers_server import build_shallow
     from test_monitor import _brightness_graph, _with_monitor
 
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
     from tools.cli import main
 
     model = _with_monitor(build_shallow(tmp_path / "m.onnx", seed=3), tmp_path / "mon.onnx",
@@ -153,7 +153,7 @@ def test_a_world_run_loads_the_generated_world(monkeypatch, tmp_path):
     from helpers_server import build_shallow
     from test_monitor import _brightness_graph, _with_monitor
 
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
     from tools.monitoreval import runner
     from tools.monitoreval.runset import RunSpec
     from tools.sim.driving import session
@@ -177,7 +177,7 @@ def test_a_world_run_loads_the_generated_world(monkeypatch, tmp_path):
 def test_the_threshold_sweep_replays_each_monitor_at_lower_thresholds():
     """A monitor whose calibrated threshold is never reached warns at its calibration's p99 instead: the sweep
     replays the stored one-second means (the driving monitor) and raw scores (a shadow) through the state machine."""
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
     from tools.monitoreval.report import sweep
     from tools.monitoreval.runset import RunSpec
 

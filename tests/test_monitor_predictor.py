@@ -68,7 +68,7 @@ def test_the_predictors_runs_never_touch_benchmark_calibration_or_evaluation_wor
 def test_the_predictor_learns_a_visible_danger_and_its_onnx_graph_answers_as_torch_does() -> None:
     """A synthetic task: a bright band on one side of the picture precedes a failure. The exported graph takes
     the steering model's own input and answers one probability per frame."""
-    from drive_server.contract import PreprocessContract
+    from drive_server.serving.contract import PreprocessContract
     from models.monitoring.autoencoder import export_score_graph
     from models.monitoring.disagreement import graph_scores
     from models.monitoring.predictor import train_predictor

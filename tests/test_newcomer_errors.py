@@ -243,10 +243,10 @@ def test_a_bad_value_inside_a_command_is_one_line_with_its_hint(monkeypatch, cap
 
 def _our_error_classes() -> list[tuple[type, tuple[type, ...], str]]:
     """Each error class of ours, the base(s) code catches it by, and the hint the boundary once chose by its name."""
-    from drive_server.contract import ContractError
-    from drive_server.listen import ListenError
-    from drive_server.model import ModelError
-    from drive_server.pipeline import InferenceError
+    from drive_server.serving.contract import ContractError
+    from drive_server.serving.model import ModelError
+    from drive_server.serving.pipeline import InferenceError
+    from drive_server.wire.listen import ListenError
     from models.data.framecache import FrameError
     from models.onnxfiles.ensemble_onnx import EnsembleError
     from models.onnxfiles.mirror_onnx import MirrorError
@@ -305,7 +305,7 @@ def test_only_the_class_not_its_name_chooses_the_hint():
 def test_drive_servers_boundary_keeps_a_bugs_traceback_and_gives_a_bad_values_hint(monkeypatch, capsys):
     """drive_server's own boundary caught every ValueError of its settings as bad input too."""
     import drive_server.cli as server_cli
-    from drive_server.control import ControlLaw
+    from drive_server.serving.control import ControlLaw
     from protocol.errors import BadValue
 
     def broken(self):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from helpers_server import SAMPLE_LOG
 
-from drive_server.contract import (
+from drive_server.serving.contract import (
     METADATA_KEY,
     NVIDIA_CONTRACT,
     PAPER_CONTRACT,
@@ -18,11 +18,11 @@ from drive_server.contract import (
     PreprocessContract,
     infer_contract,
 )
-from drive_server.preprocess import frame_to_network_image, jpeg_reduction, preprocess, to_input_tensor
+from drive_server.serving.preprocess import frame_to_network_image, jpeg_reduction, preprocess, to_input_tensor
 
 onnx = pytest.importorskip("onnx", reason="the tests build their ONNX models with the onnx package")
 
-from drive_server.model import ModelError, SteeringModel  # noqa: E402
+from drive_server.serving.model import ModelError, SteeringModel  # noqa: E402
 from models.networks.architectures import PILOTNET, SHALLOW  # noqa: E402
 from tools.bench.onnx_builders import build_model, save_model  # noqa: E402
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract
 from models.data.trainingdata import DataOptions
 from models.training.recipe import (
     NOT_IN_RECIPES,

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from helpers_server import SAMPLE_LOG, build_shallow
 
-from drive_server.recorder import Recorder
+from drive_server.observing.recorder import Recorder
 from protocol import SteerCommand
 from protocol.datalog import read_log
 from tools.wire.frames import log_frames

@@ -9,7 +9,7 @@ import stat
 
 import pytest
 
-from drive_server.stats import LatencyStats, save_stats
+from drive_server.observing.stats import LatencyStats, save_stats
 from protocol.runrecords import atomic_path, code_version, file_sha256, write_json, write_text
 
 

@@ -9,9 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from drive_server.model import SteeringModel
-from drive_server.models_dir import bundled_model_path, bundled_models
-from drive_server.pipeline import DrivePipeline
+from drive_server.serving.model import SteeringModel
+from drive_server.serving.models_dir import bundled_model_path, bundled_models
+from drive_server.serving.pipeline import DrivePipeline
 from models.data.labels import centred_average
 from protocol.datalog import read_log
 from protocol.jpeg import read_jpeg_file

@@ -9,7 +9,7 @@ import sys
 import pytest
 from helpers_server import REPO, build_graph, build_shallow, run_server_cli
 
-from drive_server.models_dir import default_model_path
+from drive_server.serving.models_dir import default_model_path
 
 pytest.importorskip("onnx", reason="the tests build their ONNX models with the onnx package")
 from onnx import helper  # noqa: E402
@@ -88,10 +88,10 @@ def test_the_limit_flags_reach_the_server_as_one_wire_limits(monkeypatch, tmp_pa
     """Issue 51: ServerConfig copied WireLimits' fields; now it nests the one object the command line built."""
     from dataclasses import fields
 
-    import drive_server.server
+    import drive_server.wire.server
     from drive_server import cli
-    from drive_server.limits import WireLimits
-    from drive_server.server_config import ServerConfig
+    from drive_server.wire.limits import WireLimits
+    from drive_server.wire.server_config import ServerConfig
     from protocol.errors import UserError
 
     assert not {f.name for f in fields(WireLimits)} & {f.name for f in fields(ServerConfig)}
@@ -104,7 +104,7 @@ def test_the_limit_flags_reach_the_server_as_one_wire_limits(monkeypatch, tmp_pa
         seen.append(config)
         raise Stop("stop here")
 
-    monkeypatch.setattr(drive_server.server, "DriveServer", capture)
+    monkeypatch.setattr(drive_server.wire.server, "DriveServer", capture)
     model = build_shallow(tmp_path / "m.onnx")
     assert cli.main(["--model", str(model), "--port", "0", "--max-connections", "7", "--header-timeout", "3",
                      "--max-pending", "5", "--idle-evict", "2"]) == 2
@@ -129,9 +129,9 @@ def test_port_in_use_exits_2(tmp_path):
 
 
 def test_deployment_imports_no_training_packages():
-    code = ("import sys, drive_server.cli, drive_server.server, tools.wire.unity_client, tools.wire.frames, "
+    code = ("import sys, drive_server.cli, drive_server.wire.server, tools.wire.unity_client, tools.wire.frames, "
             "tools.commands.replay; "
-            "from drive_server.models_dir import default_model_path; default_model_path(); "
+            "from drive_server.serving.models_dir import default_model_path; default_model_path(); "
             "bad = sorted(m for m in ('torch', 'onnx', 'matplotlib') if m in sys.modules); print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)
     assert out.returncode == 0, out.stderr

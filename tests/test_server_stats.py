@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drive_server.stats import (
+from drive_server.observing.stats import (
     STAGES,
     LatencyStats,
     load_stats,

@@ -7,8 +7,8 @@ import warnings
 
 import pytest
 
-from drive_server import transport
-from drive_server.transport import TransportTuning, fast_apply_mask, supported_eventlet
+from drive_server.wire import transport
+from drive_server.wire.transport import TransportTuning, fast_apply_mask, supported_eventlet
 
 warnings.filterwarnings("ignore", message=r"\s*Eventlet is deprecated")
 from eventlet.websocket import RFC6455WebSocket  # noqa: E402

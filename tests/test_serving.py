@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drive_server.model import ModelError, SteeringModel
-from drive_server.pipeline import DriveConfig, DrivePipeline
-from drive_server.serving import SERVING_KEY, Serving, serving_json
+from drive_server.serving.model import ModelError, SteeringModel
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline
+from drive_server.serving.settings import SERVING_KEY, Serving, serving_json
 from models.onnxfiles.gain_onnx import GainError, move_gain_to_serving
 from protocol.errors import BadValue
 

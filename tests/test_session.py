@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drive_server.control import ControlLaw
+from drive_server.serving.control import ControlLaw
 from protocol import SteerCommand
 from protocol.facts import COLLECT_SPEED_KMH
 from tools.sim.driving.drivers import AutopilotDriver, Frame, LocalDriver, OnnxDriver, Reply, Scene, SocketDriver

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from helpers_server import SAMPLE_LOG, build_shallow, run_server_cli
 
-from drive_server.model import ModelError, SteeringModel
-from drive_server.models_dir import default_model_path
-from drive_server.pipeline import DriveConfig, DrivePipeline
-from drive_server.serving import SERVING_KEY, serving_json
-from drive_server.smoothing import SteeringSmoother, check_alpha
+from drive_server.serving.model import ModelError, SteeringModel
+from drive_server.serving.models_dir import default_model_path
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline
+from drive_server.serving.settings import SERVING_KEY, serving_json
+from drive_server.serving.smoothing import SteeringSmoother, check_alpha
 from protocol import parse_telemetry
 from tools.cli import main as rbc
 

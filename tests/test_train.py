@@ -12,14 +12,14 @@ import pytest
 torch = pytest.importorskip("torch")
 ort = pytest.importorskip("onnxruntime")
 
-from drive_server.contract import (  # noqa: E402
+from drive_server.serving.contract import (  # noqa: E402
     METADATA_KEY,
     METADATA_MODEL_INFO_KEY,
     NVIDIA_CONTRACT,
     PAPER_CONTRACT,
     PreprocessContract,
 )
-from drive_server.preprocess import preprocess, to_input_tensor  # noqa: E402
+from drive_server.serving.preprocess import preprocess, to_input_tensor  # noqa: E402
 from models.data.framecache import build_cache, load_frame  # noqa: E402
 from models.networks.checkpoint import exported_weights  # noqa: E402
 from models.networks.nets import ContractInput, build_model  # noqa: E402
@@ -112,8 +112,8 @@ def test_onnx_export_carries_the_contract_and_matches_pytorch(run) -> None:
 
 
 def test_drive_server_loads_the_exported_model(run) -> None:
-    model_mod = pytest.importorskip("drive_server.model")
-    pipeline_mod = pytest.importorskip("drive_server.pipeline")
+    model_mod = pytest.importorskip("drive_server.serving.model")
+    pipeline_mod = pytest.importorskip("drive_server.serving.pipeline")
     if not hasattr(model_mod, "SteeringModel") or not hasattr(pipeline_mod, "DrivePipeline"):
         pytest.skip("drive server pipeline API not available")
     model = model_mod.SteeringModel(run.onnx)

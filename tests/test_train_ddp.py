@@ -100,6 +100,6 @@ def test_torchrun_two_processes_trains_and_exports_a_model_drive_server_loads(tm
     assert proc.returncode == 0, proc.stderr[-3000:]
     record = json.loads((out / "config.json").read_text())
     assert record["world_size"] == 2 and record["result"]["onnx_max_diff"] < 1e-4
-    from drive_server.model import SteeringModel
+    from drive_server.serving.model import SteeringModel
 
     SteeringModel(out / "model.onnx")  # loads as the drive server loads it

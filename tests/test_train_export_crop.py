@@ -12,10 +12,10 @@ import pytest
 torch = pytest.importorskip("torch")
 ort = pytest.importorskip("onnxruntime")
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract  # noqa: E402
-from drive_server.model import SteeringModel  # noqa: E402
-from drive_server.pipeline import DriveConfig, DrivePipeline  # noqa: E402
-from drive_server.preprocess import to_input_tensor  # noqa: E402
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract  # noqa: E402
+from drive_server.serving.model import SteeringModel  # noqa: E402
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline  # noqa: E402
+from drive_server.serving.preprocess import to_input_tensor  # noqa: E402
 from models.data.framecache import build_cache, load_frame  # noqa: E402
 from models.networks.nets import ContractInput, build_model  # noqa: E402
 from models.training import train as train_mod  # noqa: E402

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drive_server.preprocess import to_input_tensor
+from drive_server.serving.preprocess import to_input_tensor
 from models.augmentation import augment, geometry, reference
 from models.augmentation.augment import AugmentSpec, draw_params
 from models.augmentation.fastaug import FastAugmenter
@@ -168,8 +168,8 @@ def test_moved_camera_moves_the_road_as_the_camera_geometry_says(x: float) -> No
 
 def test_moved_camera_fast_path_is_the_reference() -> None:
     """The batched path (network size, composed with flips and turns) against the literal one on a road image."""
-    from drive_server.contract import PAPER_CONTRACT
-    from drive_server.preprocess import frame_to_network_image
+    from drive_server.serving.contract import PAPER_CONTRACT
+    from drive_server.serving.preprocess import frame_to_network_image
 
     road = _road((-3.5, -1.75, 0.0, 1.75, 3.5), half_width_m=0.3)
     net = frame_to_network_image(road, PAPER_CONTRACT)

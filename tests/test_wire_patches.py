@@ -1,6 +1,6 @@
 """The wire's patches of eventlet, python-engineio and python-socketio live in one room, and are checked at start-up.
 
-Only :mod:`drive_server.patches` names a private attribute of those libraries (the table of names is read
+Only :mod:`drive_server.wire.patches` names a private attribute of those libraries (the table of names is read
 from the patch module, and the table is proved complete against its source); a version outside the
 checked table gets one warning line; a patched name that disappeared is refused in one line.
 """
@@ -15,14 +15,14 @@ from typing import Any
 
 import pytest
 
-from drive_server import patches
-from drive_server.patches import PatchError
-from drive_server.patches import eventlet_engineio as wire
+from drive_server.wire import patches
+from drive_server.wire.patches import PatchError
+from drive_server.wire.patches import eventlet_engineio as wire
 
 warnings.filterwarnings("ignore", message=patches.EVENTLET_DEPRECATION)
 
 REPO = Path(__file__).resolve().parents[1]
-PATCH_ROOM = REPO / "drive_server" / "patches"
+PATCH_ROOM = REPO / "drive_server" / "wire" / "patches"
 PRIVATE = {entry.name for entry in wire.PRIVATE_NAMES}
 #: Source inspection of a library is a reach into its private parts too.
 INSPECTION = {"getsource", "getsourcelines", "getattr_static"}
@@ -58,7 +58,7 @@ def test_no_other_module_names_a_patched_private_name_or_reads_library_source():
     assert len(outside) > 20
     found = {str(path.relative_to(REPO)): sorted(names) for path in outside
              if (names := _reaches(path.read_text(encoding="utf-8")))}
-    assert found == {}, "move these into drive_server/patches/ (and its PRIVATE_NAMES)"
+    assert found == {}, "move these into drive_server/wire/patches/ (and its PRIVATE_NAMES)"
 
 
 def test_the_check_sees_a_private_name_used_outside_the_patch_room():
@@ -111,7 +111,7 @@ def test_a_patched_name_that_disappears_is_refused_in_one_line(entry, monkeypatc
 
 
 def _server() -> Any:
-    from drive_server.server import DriveServer, ServerConfig
+    from drive_server.wire.server import DriveServer, ServerConfig
 
     # the pipeline is not touched while the server is created: only the wire is built
     return DriveServer(None, ServerConfig())  # type: ignore[arg-type]
@@ -132,13 +132,13 @@ def test_an_unchecked_version_is_one_warning_line_at_start_up(monkeypatch, caplo
     caplog.set_level(logging.WARNING)
     server = _server()
     assert server.sio is not None  # warned, not refused
-    lines = [r.getMessage() for r in caplog.records if r.name == "drive_server.patches"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "drive_server.wire.patches"]
     assert len(lines) == 1 and "\n" not in lines[0], lines
     installed = {lib: patches.installed_version(lib) for lib in ("eventlet", "python-engineio", "python-socketio")}
     assert f"eventlet {installed['eventlet']}" in lines[0]
     assert f"python-engineio {installed['python-engineio']}" in lines[0]
     assert f"python-socketio {installed['python-socketio']}," not in lines[0].split("(checked")[0]
-    assert "not checked" in lines[0] and "drive_server.patches.eventlet_engineio" in lines[0]
+    assert "not checked" in lines[0] and "drive_server.wire.patches.eventlet_engineio" in lines[0]
 
 
 def test_an_unknown_backend_is_named():

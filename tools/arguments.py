@@ -47,7 +47,7 @@ def add_gain_argument(parser: argparse.ArgumentParser) -> None:
 
 def serving_gain(args: argparse.Namespace) -> float | None:
     """The ``--gain`` value (None: the model's own), or a CommandError in one line."""
-    from drive_server.serving import check_gain
+    from drive_server.serving.settings import check_gain
 
     return _checked("--gain", args.gain, check_gain)
 
@@ -82,7 +82,7 @@ def add_loop_rule_arguments(parser: argparse.ArgumentParser) -> None:
 
 def smooth_alpha(args: argparse.Namespace) -> float | None:
     """The ``--smooth`` value (None: the model's own), or a CommandError in one line."""
-    from drive_server.smoothing import check_alpha
+    from drive_server.serving.smoothing import check_alpha
 
     return _checked("--smooth", args.smooth, check_alpha)
 
@@ -155,7 +155,7 @@ def add_moved_to_recipe_flags(parser: argparse.ArgumentParser) -> None:
 
 def add_monitor_argument(parser: argparse.ArgumentParser, what: str) -> None:
     """``--monitor off|warn|act``: drive_server's flag of the same name, for a command that drives a model."""
-    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
 
     parser.add_argument("--monitor", choices=[m.value for m in MonitorMode], default=MonitorPolicy.mode.value,
                         help=f"{what}: the model's misbehaviour monitor, if its file carries one, as drive_server "

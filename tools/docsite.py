@@ -49,8 +49,8 @@ API: tuple[str, ...] = (
     "tools.sim.driving.session:run_scenario",
     "models.training.train_config:TrainConfig",
     "models.training.train:train",
-    "drive_server.model:SteeringModel",
-    "drive_server.pipeline:DrivePipeline",
+    "drive_server.serving.model:SteeringModel",
+    "drive_server.serving.pipeline:DrivePipeline",
     "tools.evaluate.suite:run_suite",
     "tools.envs.drive_env:DriveEnv",
     "tools.envs.config:DriveEnvConfig",
@@ -160,9 +160,9 @@ def models_markdown() -> str:
 
     import onnxruntime as ort
 
-    from drive_server.models_dir import bundled_models
-    from drive_server.serving import NO_GAIN, SERVING_KEY, Serving
-    from drive_server.smoothing import OFF
+    from drive_server.serving.models_dir import bundled_models
+    from drive_server.serving.settings import NO_GAIN, SERVING_KEY, Serving
+    from drive_server.serving.smoothing import OFF
 
     lines = ["| model | network (parameters) | behavior, approach | camera rig | training samples | answer |",
              "|---|---|---|---|---|---|"]

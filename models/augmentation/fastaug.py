@@ -37,8 +37,8 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from drive_server.contract import PreprocessContract
-from drive_server.preprocess import to_input_tensor
+from drive_server.serving.contract import PreprocessContract
+from drive_server.serving.preprocess import to_input_tensor
 from models.augmentation import geometry
 from models.augmentation.augment import CENTER, LEFT, RIGHT, AugmentSpec, AugParams, draw_params
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
-from drive_server.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
+from drive_server.serving.contract import NVIDIA_CONTRACT, PAPER_CONTRACT, PreprocessContract
 from models.augmentation.augment import AugmentSpec
 from models.networks.architectures import ARCHITECTURES, Arch
 

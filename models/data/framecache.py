@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drive_server.contract import PreprocessContract
-from drive_server.preprocess import frame_to_network_image, jpeg_reduction
+from drive_server.serving.contract import PreprocessContract
+from drive_server.serving.preprocess import frame_to_network_image, jpeg_reduction
 from protocol.datalog import Sample
 from protocol.errors import BadValue, ProtocolError
 from protocol.facts import CAMERAS

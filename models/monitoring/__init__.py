@@ -1,2 +1,2 @@
-"""Misbehaviour monitors for drive_server (:mod:`drive_server.monitor`): trained, calibrated on nominal driving and
-attached to a steering model's file here; served there without torch."""
+"""Misbehaviour monitors for drive_server (:mod:`drive_server.serving.monitor`): trained, calibrated on nominal
+driving and attached to a steering model's file here; served there without torch."""

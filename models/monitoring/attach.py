@@ -1,13 +1,13 @@
 """A steering model's file with a monitor in it: the same steering graph, plus the monitor's spec, thresholds
-and graph in the metadata (:mod:`drive_server.monitor`), written atomically and checked by loading it the way
+and graph in the metadata (:mod:`drive_server.serving.monitor`), written atomically and checked by loading it the way
 drive_server does."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from drive_server.model import SteeringModel
-from drive_server.monitor import MONITOR_GRAPH_KEY, MONITOR_KEY, MonitorSpec, encode_graph
+from drive_server.serving.model import SteeringModel
+from drive_server.serving.monitor import MONITOR_GRAPH_KEY, MONITOR_KEY, MonitorSpec, encode_graph
 from protocol.runrecords import atomic_path
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drive_server.monitor import FRAMES_PER_SECOND
+from drive_server.serving.monitor import FRAMES_PER_SECOND
 from protocol.errors import BadValue
 
 FRAMES_PER_HOUR = FRAMES_PER_SECOND * 3600

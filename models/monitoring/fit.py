@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from drive_server.model import SteeringModel
-from drive_server.monitor import FRAMES_PER_SECOND, MonitorSpec
+from drive_server.serving.model import SteeringModel
+from drive_server.serving.monitor import FRAMES_PER_SECOND, MonitorSpec
 from models.monitoring.attach import attach_monitor
 from models.monitoring.autoencoder import SCORE_NAME as AUTOENCODER
 from models.monitoring.autoencoder import export_score_graph, train_autoencoder

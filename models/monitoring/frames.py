@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drive_server.contract import PreprocessContract
-from drive_server.preprocess import jpeg_reduction, preprocess
+from drive_server.serving.contract import PreprocessContract
+from drive_server.serving.preprocess import jpeg_reduction, preprocess
 from protocol.datalog import find_log, read_log
 from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drive_server.contract import PreprocessContract
+from drive_server.serving.contract import PreprocessContract
 from models.monitoring.training import channels_last, fit_batches, input_resize, network_input, seeded
 
 log = logging.getLogger(__name__)

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drive_server.contract import PreprocessContract
+from drive_server.serving.contract import PreprocessContract
 
 #: The side an input whose sides a network's total stride does not divide is resized to first (the shallow
 #: CNN's own 64x64).

@@ -17,9 +17,9 @@ import onnx
 import onnxruntime as ort
 from onnx import compose, helper
 
-from drive_server.contract import PreprocessContract
-from drive_server.serving import SERVING_KEY, Serving
-from drive_server.smoothing import NAME, OLD_NAMES
+from drive_server.serving.contract import PreprocessContract
+from drive_server.serving.settings import SERVING_KEY, Serving
+from drive_server.serving.smoothing import NAME, OLD_NAMES
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 from protocol import runrecords
 from protocol.errors import BadValue

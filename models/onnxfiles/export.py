@@ -18,10 +18,10 @@ import onnxruntime as ort
 import torch
 from torch import nn
 
-from drive_server.contract import METADATA_KEY, PreprocessContract
-from drive_server.preprocess import to_input_tensor
-from drive_server.serving import NO_GAIN
-from drive_server.smoothing import OFF
+from drive_server.serving.contract import METADATA_KEY, PreprocessContract
+from drive_server.serving.preprocess import to_input_tensor
+from drive_server.serving.settings import NO_GAIN
+from drive_server.serving.smoothing import OFF
 from models.networks.nets import ContractInput
 from models.onnxfiles.onnx_metadata import set_model_metadata
 from protocol import runrecords

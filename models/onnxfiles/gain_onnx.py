@@ -1,4 +1,5 @@
-"""Move a gain multiplied into an older model file's graph into its serving metadata (``drive_server.serving``).
+"""Move a gain multiplied into an older model file's graph into its serving metadata
+(``drive_server.serving.settings``).
 
 Files exported before the gain became a serving setting end in ``Mul(steering, S)`` and record ``output_scale:
 S``. They keep serving as they are; this rewrites one so its graph answers the network's own prediction (what
@@ -15,7 +16,7 @@ import onnx
 import onnxruntime as ort
 from onnx import numpy_helper
 
-from drive_server.serving import SERVING_KEY, Serving
+from drive_server.serving.settings import SERVING_KEY, Serving
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 from protocol import runrecords
 from protocol.errors import BadValue

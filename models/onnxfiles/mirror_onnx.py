@@ -18,8 +18,8 @@ import onnx
 import onnxruntime as ort
 from onnx import helper, numpy_helper
 
-from drive_server.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
-from drive_server.serving import SERVING_KEY, Serving, check_gain
+from drive_server.serving.contract import METADATA_MODEL_INFO_KEY, PreprocessContract
+from drive_server.serving.settings import SERVING_KEY, Serving, check_gain
 from models.data.behavior import keeps_lane
 from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
 from protocol import runrecords
@@ -36,7 +36,7 @@ class MirrorError(BadValue):
 def mirror_average_onnx(src: Path, dst: Path, smoothing: float | None = None, seed: int = 0,
                         gain: float | None = None) -> float:
     """Write ``dst`` (atomically) from ``src``; return the max |mirrored - (f(x) - f(mirror x)) / 2| on random
-    inputs (``seed``). The file asks drive_server for ``smoothing`` and ``gain`` (drive_server.serving; None:
+    inputs (``seed``). The file asks drive_server for ``smoothing`` and ``gain`` (drive_server.serving.settings; None:
     what ``src`` asks for), as a recipe's ``[export]`` does."""
     model = read_steering_graph(src, MirrorError)
     try:

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
-from drive_server.serving import GAIN, GAIN_OLD_NAMES, NO_GAIN, SERVING_KEY, Serving
-from drive_server.smoothing import NAME, OFF, OLD_NAMES
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
+from drive_server.serving.settings import GAIN, GAIN_OLD_NAMES, NO_GAIN, SERVING_KEY, Serving
+from drive_server.serving.smoothing import NAME, OFF, OLD_NAMES
 from models.networks.architectures import ARCHITECTURES
 from models.networks.runfiles import RunPaths, RunRecord
 from models.onnxfiles.card_text import block, command, count, quoted, shown, wrap
@@ -41,7 +41,7 @@ class ModelFile:
     info: dict[str, Any]  # its record (rbc.model); {} if none
     contract: dict[str, Any]  # its preprocessing (rbc.preprocess); {} if none
     smoothing: float = OFF  # the steering smoothing it asks drive_server for (1: off)
-    gain: float = 1.0  # the steering gain it asks drive_server for (drive_server.serving; 1: none)
+    gain: float = 1.0  # the steering gain it asks drive_server for (drive_server.serving.settings; 1: none)
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
-from drive_server.serving import GAIN, NO_GAIN, SERVING_KEY, serving_json
-from drive_server.smoothing import NAME, OFF, OLD_NAMES
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
+from drive_server.serving.settings import GAIN, NO_GAIN, SERVING_KEY, serving_json
+from drive_server.serving.smoothing import NAME, OFF, OLD_NAMES
 
 if TYPE_CHECKING:
     import onnx
@@ -60,7 +60,7 @@ def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
 def set_model_metadata(proto: onnx.ModelProto, info: dict[str, Any], smoothing: float = OFF,
                        contract: PreprocessContract | None = None, gain: float = NO_GAIN) -> None:
     """Replace ``proto``'s model info (and its contract, if given) and ask drive_server for ``smoothing`` (< 1)
-    and ``gain`` (drive_server.serving); keys the model already carries otherwise stay."""
+    and ``gain`` (drive_server.serving.settings); keys the model already carries otherwise stay."""
     meta = {p.key: p.value for p in proto.metadata_props}
     if contract is not None:
         meta[METADATA_KEY] = contract.to_json()

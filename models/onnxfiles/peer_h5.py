@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drive_server.contract import PreprocessContract
+from drive_server.serving.contract import PreprocessContract
 from protocol.errors import BadValue
 
 if TYPE_CHECKING:

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drive_server.preprocess import frame_to_network_image
+from drive_server.serving.preprocess import frame_to_network_image
 from models.onnxfiles.peer_h5 import ARCH, PEER_CONTRACT, PeerImportError, PeerWeights, read_peer_h5
 from protocol.datalog import read_log
 from protocol.jpeg import read_jpeg_file

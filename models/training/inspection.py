@@ -78,7 +78,7 @@ def plot_predictions(out: Path, data, pipeline, model, onnx_path: Path, frames: 
     import matplotlib.pyplot as plt
     import torch
 
-    from drive_server.preprocess import to_input_tensor
+    from drive_server.serving.preprocess import to_input_tensor
     from models.training.metrics import steering_metrics
 
     first_log = data.dataset.samples[0].log
@@ -156,7 +156,7 @@ def plot_activations(out: Path, data, pipeline, model, count: int, seed: int) ->
     import matplotlib.pyplot as plt
     import torch
 
-    from drive_server.preprocess import to_input_tensor
+    from drive_server.serving.preprocess import to_input_tensor
     from models.augmentation.fastaug import training_contract
     from models.networks.nets import conv_activations
 

@@ -11,7 +11,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drive_server.preprocess import to_input_tensor
+from drive_server.serving.preprocess import to_input_tensor
 from models.augmentation.fastaug import training_contract
 from models.data.behavior import Pipeline
 from models.data.trainingdata import PreparedData

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from drive_server.contract import DECODE_REDUCTIONS, ContractError, PreprocessContract
-from drive_server.serving import GAIN_RANGE, NO_GAIN
-from drive_server.smoothing import OFF as SMOOTHING_OFF
+from drive_server.serving.contract import DECODE_REDUCTIONS, ContractError, PreprocessContract
+from drive_server.serving.settings import GAIN_RANGE, NO_GAIN
+from drive_server.serving.smoothing import OFF as SMOOTHING_OFF
 from models.augmentation import geometry
 from models.augmentation.augment import AugmentSpec
 from models.data.behavior import (

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
-from drive_server.stats import STAGES
+from drive_server.observing.stats import STAGES
 from tools.errors import CommandError
 from tools.wire.frames import SourceFrame, log_frames, synthetic_frames
 from tools.wire.server_process import ServerProcess, ServerStartError

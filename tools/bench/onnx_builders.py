@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drive_server.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PAPER_CONTRACT, PreprocessContract
+from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PAPER_CONTRACT, PreprocessContract
 from models.networks.architectures import ARCHITECTURES, Architecture
 
 if TYPE_CHECKING:

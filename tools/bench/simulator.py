@@ -166,7 +166,7 @@ def lap_wall_time(tracks: list[Track], plan: SimBenchPlan, vehicle: str = "kinem
     import os
     import tempfile
 
-    from drive_server.models_dir import bundled_model_path
+    from drive_server.serving.models_dir import bundled_model_path
     from tools.sim.driving.drivers import SocketDriver
     from tools.sim.driving.scenario import ScenarioConfig
     from tools.sim.driving.session import run_scenario

@@ -72,7 +72,7 @@ def _write_preview(args: argparse.Namespace, config: TrainConfig) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from drive_server.preprocess import blank_edges
+    from drive_server.serving.preprocess import blank_edges
     from models.augmentation.augment import draw_params
     from models.augmentation.fastaug import FastAugmenter
     from models.augmentation.reference import augment_reference

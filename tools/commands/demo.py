@@ -60,7 +60,7 @@ def _server_latency(stats_path: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.models_dir import bundled_model_path, demo_model_path
+    from drive_server.serving.models_dir import bundled_model_path, demo_model_path
     from protocol.runrecords import write_json
     from tools.console import Progress
     from tools.sim.driving.drivers import SocketDriver

@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.smoothing import check_alpha
+    from drive_server.serving.smoothing import check_alpha
     from models.onnxfiles.ensemble_onnx import EnsembleError, ensemble_onnx
 
     if args.out.suffix != ".onnx":

@@ -9,7 +9,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from drive_server.model import SteeringModel
+from drive_server.serving.model import SteeringModel
 from protocol.runrecords import code_version, file_sha256, write_text
 from tools.arguments import add_camera_argument, add_monitor_argument, add_vehicle_argument
 from tools.console import RunProgress
@@ -79,7 +79,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _model_path(args: argparse.Namespace) -> Path:
     if args.model:
         return args.model
-    from drive_server.models_dir import bundled_model_path
+    from drive_server.serving.models_dir import bundled_model_path
 
     return bundled_model_path(args.behavior)
 
@@ -103,7 +103,7 @@ def _monitor(args: argparse.Namespace, steering: SteeringModel, model: Path) -> 
     to drive with."""
     if args.monitor == "off":
         return None
-    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
     from tools.evaluate.monitor import monitor_meta
 
     found = steering.monitor()

@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     if args.server:
         url = args.server
     else:
-        from drive_server.models_dir import bundled_model_path
+        from drive_server.serving.models_dir import bundled_model_path
 
         model = args.model or bundled_model_path("simplistic")
         server = ServerProcess(model, ["--log-every", "0", *args.server_args.split()])

@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.model import SteeringModel
+    from drive_server.serving.model import SteeringModel
     from models.onnxfiles.mirror_onnx import MirrorError, mirror_average_onnx
 
     if args.out.suffix != ".onnx":

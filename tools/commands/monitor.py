@@ -2,7 +2,7 @@
 
 ``fit`` trains a small autoencoder on nominal driving (SelfOracle's reconstruction error), sets its warning and
 alarm thresholds from OTHER nominal runs as quantiles for a target false-alarm rate, and writes the steering
-model's file with the monitor in its metadata (:mod:`models.monitoring`; served by :mod:`drive_server.monitor`).
+model's file with the monitor in its metadata (:mod:`models.monitoring`; served by :mod:`drive_server.serving.monitor`).
 ``failures`` drives the model on training worlds, perturbed, degraded and nominal, and keeps every frame's input
 with the run's take-overs: what ``fit --score predictor`` learns from. ``eval`` measures it on the headless
 simulator: held-out nominal driving, perturbed runs and degraded models,
@@ -114,7 +114,7 @@ def _failures(args: argparse.Namespace) -> int:
     import logging
 
     if not logging.getLogger().isEnabledFor(logging.DEBUG):
-        logging.getLogger("drive_server.monitor").setLevel(logging.ERROR)
+        logging.getLogger("drive_server.serving.client_monitor").setLevel(logging.ERROR)
     specs = calibration_runs(args.nominal) if args.run_set == "calibration" else \
         failure_training_runs(args.per_setting, args.nominal)
 
@@ -146,7 +146,7 @@ def _eval(args: argparse.Namespace) -> int:
     import logging
 
     if not logging.getLogger().isEnabledFor(logging.DEBUG):  # hundreds of runs: their state changes only with -v
-        logging.getLogger("drive_server.monitor").setLevel(logging.ERROR)
+        logging.getLogger("drive_server.serving.client_monitor").setLevel(logging.ERROR)
     bar = Progress("runs", "run")
 
     def progress(done: int, total: int, what: str) -> None:

@@ -28,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.models_dir import bundled_models
+    from drive_server.serving.models_dir import bundled_models
     from protocol.datalog import read_log
     from protocol.runrecords import code_version, write_json
     from tools.evaluate.offline import camera_frames, score_models

@@ -7,7 +7,7 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from drive_server.control import ControlLaw
+from drive_server.serving.control import ControlLaw
 from tools.arguments import add_camera_argument, add_monitor_argument, add_speed_unit_argument, add_vehicle_argument
 from tools.console import Progress
 from tools.errors import CommandError
@@ -71,7 +71,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _driver(args: argparse.Namespace):
-    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
     from tools.sim.driving.drivers import AutopilotDriver, OnnxDriver, SocketDriver
 
     if args.server:

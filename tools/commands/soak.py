@@ -61,7 +61,7 @@ def _verdict(result: SoakResult) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drive_server.models_dir import default_model_path
+    from drive_server.serving.models_dir import default_model_path
     from tools.bench.soak import Soak
     from tools.bench.soak_plot import plot_soak
     from tools.wire.server_process import ServerProcess

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drive_server.control import ControlLaw
+from drive_server.serving.control import ControlLaw
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name
 from protocol.errors import BadValue
 from protocol.facts import CAMERAS

@@ -32,9 +32,9 @@ def make_driver(log: RecordedDrive, model: Path | None, baseline: str | None, bi
     to ``readings`` if given.
     """
     if model is not None:
-        from drive_server.model import SteeringModel
-        from drive_server.monitor import MonitorMode, MonitorPolicy
-        from drive_server.pipeline import DriveConfig, DrivePipeline
+        from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
+        from drive_server.serving.model import SteeringModel
+        from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 
         # the monitor as --monitor warn, without a time budget: the loop runs on the log's clock, so a busy
         # machine must not switch it off and change the figures

@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-from drive_server.contract import PreprocessContract
-from drive_server.control import ControlLaw
+from drive_server.serving.contract import PreprocessContract
+from drive_server.serving.control import ControlLaw
 from protocol.errors import BadValue
 from tools.envs.client import StepReport
 from tools.envs.worlds import WorldDistribution
@@ -190,7 +190,7 @@ def _law_of(value: object) -> ControlLaw:
     if isinstance(value, ControlLaw):
         return value
     if not isinstance(value, dict):
-        raise BadValue(f"law must be a drive_server.control.ControlLaw or a dict of its fields, got {value!r}")
+        raise BadValue(f"law must be a drive_server.serving.control.ControlLaw or a dict of its fields, got {value!r}")
     known = [f.name for f in fields(ControlLaw)]
     unknown = sorted(set(value) - set(known))
     if unknown:
@@ -213,7 +213,7 @@ def _contract_of(value: object, camera: str) -> PreprocessContract:
             raise BadValue(f"unknown contract option(s): {', '.join(unknown)}", f"known: {', '.join(known)}")
         return PreprocessContract(**value)
     if isinstance(value, str | Path) and str(value).endswith(".onnx"):
-        from drive_server.model import SteeringModel
+        from drive_server.serving.model import SteeringModel
 
         return SteeringModel(Path(value)).contract
     raise BadValue(f"contract must be a PreprocessContract, a dict of its fields or an .onnx file, got {value!r}")

@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from drive_server.control import ControlLaw
-from drive_server.model import InferenceConfig, SteeringModel
-from drive_server.pipeline import DriveConfig, DrivePipeline
-from drive_server.smoothing import SteeringSmoother
+from drive_server.serving.control import ControlLaw
+from drive_server.serving.model import InferenceConfig, SteeringModel
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline
+from drive_server.serving.smoothing import SteeringSmoother
 from protocol import SpeedUnit
 from protocol.errors import BadValue
 from protocol.jpeg import decode_jpeg

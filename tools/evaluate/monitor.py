@@ -19,11 +19,12 @@ from tools.monitoreval.scoring import DEFAULT_RULES, IN_TIME_S, ScoringRules, fo
 from tools.monitoreval.summary import run_trace
 
 if TYPE_CHECKING:
-    from drive_server.monitor import MonitorPolicy, MonitorSpec
+    from drive_server.serving.client_monitor import MonitorPolicy
+    from drive_server.serving.monitor import MonitorSpec
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.scenario import RunResult
 
-STATES = ("warning", "alarm")  # drive_server.monitor.Level 1 and 2, by their labels
+STATES = ("warning", "alarm")  # drive_server.serving.client_monitor.Level 1 and 2, by their labels
 
 
 def monitor_meta(spec: MonitorSpec, policy: MonitorPolicy, rules: ScoringRules = DEFAULT_RULES) -> dict[str, Any]:

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from drive_server.model import SteeringModel
-from drive_server.pipeline import DriveConfig, DrivePipeline
-from drive_server.smoothing import OFF
+from drive_server.serving.model import SteeringModel
+from drive_server.serving.pipeline import DriveConfig, DrivePipeline
+from drive_server.serving.smoothing import OFF
 from models.data.labels import centred_average
 from models.training.metrics import steering_metrics
 from protocol.datalog import Sample, read_log
@@ -61,7 +61,7 @@ def camera_frames(samples: Sequence[Sample], camera: str) -> list[tuple[Path, fl
 def score_model(model_path: Path, frames: Sequence[tuple[Path, float]],
                 on_frame: Callable[[], None] | None = None, smooth_frames: int = 0,
                 smooth: float | None = None) -> OfflineScore:
-    # the network's own answer: the serving gain is for the closed loop (drive_server.serving), not scored here
+    # the network's own answer: the serving gain is for the closed loop (drive_server.serving.settings), not scored here
     pipeline = DrivePipeline(SteeringModel(model_path), DriveConfig(smoothing=smooth, gain=1.0))
     smoother = pipeline.smoother()
     pred = np.empty(len(frames))

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from drive_server.control import ControlLaw
+from drive_server.serving.control import ControlLaw
 from protocol.appending import append_record
 
 if TYPE_CHECKING:
@@ -70,7 +70,7 @@ def _driver(spec: DriverSpec, speed_limit_kmh: float):
         if spec.server:
             _DRIVERS[key] = SocketDriver(spec.server)
         elif spec.model:
-            from drive_server.monitor import MonitorMode, MonitorPolicy
+            from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
 
             law = replace(spec.law, speed_limit_kmh=speed_limit_kmh)  # the scenario's speed limit
             _DRIVERS[key] = OnnxDriver(spec.model, law=law, threads=spec.threads,

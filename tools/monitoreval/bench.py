@@ -43,7 +43,7 @@ class EvalPlan:
 
 
 def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
-    from drive_server.model import SteeringModel
+    from drive_server.serving.model import SteeringModel
     from tools.monitoreval.cost import monitor_cost
     from tools.monitoreval.report import closed_loop, compare, figures, sweep, table_rows, tables
     from tools.monitoreval.runner import drive_all, file_digest

@@ -14,9 +14,9 @@ from protocol.errors import BadValue
 
 
 def monitor_cost(model: Path, log_folder: Path, frames: int = 2000, seed: int = 0) -> dict[str, Any]:
-    from drive_server.model import SteeringModel
-    from drive_server.monitor import MonitorMode, MonitorPolicy
-    from drive_server.pipeline import DriveConfig, DrivePipeline
+    from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.model import SteeringModel
+    from drive_server.serving.pipeline import DriveConfig, DrivePipeline
     from protocol import parse_telemetry
     from tools.wire.frames import log_frames
 

@@ -21,7 +21,7 @@ from tools.monitoreval.runner import RUN_CODE, degraded_model, file_digest
 from tools.monitoreval.runset import RunSpec
 
 if TYPE_CHECKING:
-    from drive_server.monitor import ClientMonitor, MonitorReading
+    from drive_server.serving.client_monitor import ClientMonitor, MonitorReading
 
 
 class _Recording:
@@ -41,7 +41,7 @@ class _Recording:
 
 def drive_recorded(spec: RunSpec, model: Path) -> FailureRun:
     """One run of ``model`` (``--monitor warn``, its own monitor in the loop) with every frame's input kept."""
-    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
     from tools.sim.driving.drivers import OnnxDriver, Scene
     from tools.sim.driving.model_rig import model_rig
     from tools.sim.driving.scenario import ScenarioConfig

@@ -14,7 +14,7 @@ from tools.monitoreval.runset import RunSpec
 from tools.monitoreval.scoring import MISBEHAVIOUR_CAUSES, RunTrace, ScoringRules, score
 
 if TYPE_CHECKING:
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,7 @@ def closed_loop(results: Sequence[tuple[RunSpec, str, dict[str, Any]]]) -> dict[
 def replayed(spec: RunSpec, run: dict[str, Any], values: Sequence[float], monitor: MonitorSpec) -> RunTrace:
     """``run``'s trace had ``monitor`` (its thresholds and window) seen these per-frame ``values``: the values
     through the server's own state machine."""
-    from drive_server.monitor import MonitorState
+    from drive_server.serving.client_monitor import MonitorState
 
     state = MonitorState(monitor)
     levels = np.array([int(state.update(v).level) for v in values], dtype=np.uint8)
@@ -110,7 +110,7 @@ def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
 def _at_threshold(spec: RunSpec, run: dict[str, Any], name: str | None, warn: float, window: int) -> RunTrace:
     """A run's trace had the monitor warned from ``warn`` on (alarms not counted): the driving monitor's stored
     one-second means (a window of 1), or a shadow's stored scores through its window."""
-    from drive_server.monitor import MonitorSpec
+    from drive_server.serving.monitor import MonitorSpec
 
     if name is None:
         values, spec_window = [m if m is not None else 0.0 for m in run["mean"]], 1

@@ -21,7 +21,8 @@ from protocol.errors import BadValue
 from tools.monitoreval.runset import RunSpec
 
 if TYPE_CHECKING:
-    from drive_server.monitor import ClientMonitor, MonitorGraph, MonitorReading
+    from drive_server.serving.client_monitor import ClientMonitor, MonitorReading
+    from drive_server.serving.monitor import MonitorGraph
     from tools.sim.driving.drivers import Scene
 
 log = logging.getLogger(__name__)
@@ -29,7 +30,7 @@ log = logging.getLogger(__name__)
 JOURNAL = "runs.jsonl"
 #: The modules whose code a run's result depends on (their imports are followed).
 RUN_CODE = ("tools.monitoreval.runner", "tools.sim.driving.session", "tools.sim.driving.drivers",
-            "drive_server.pipeline")
+            "drive_server.serving.pipeline")
 
 
 def file_digest(path: Path) -> str:
@@ -94,8 +95,8 @@ class _Shadowed:
 def drive(spec: RunSpec, model: Path, mode: str, shadows: tuple[Path, ...] = ()) -> dict[str, Any]:
     """One run: the per-frame monitor state and one-second mean, the take-overs, and the lap's figures; each
     of ``shadows`` (model files with another monitor for the same steering input) scored on every frame too."""
-    from drive_server.model import SteeringModel
-    from drive_server.monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
+    from drive_server.serving.model import SteeringModel
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.model_rig import model_rig
     from tools.sim.driving.scenario import ScenarioConfig

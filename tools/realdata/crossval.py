@@ -55,7 +55,7 @@ class RecordingScore:
     # with the recorded steering: about the most r any picture-to-steering model reaches here
     r_to_intent: float | None = None
     intent_r: float | None = None
-    smooth: float = 1.0  # the model's steering smoothed as drive_server does (drive_server.smoothing; 1: not)
+    smooth: float = 1.0  # the model's steering smoothed as drive_server does (drive_server.serving.smoothing; 1: not)
     off_road_s: float | None = None  # closed loop: log time the recorded driver was off the road (not counted)
 
     @property

@@ -23,14 +23,14 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from drive_server.control import ControlLaw
+from drive_server.serving.control import ControlLaw
 from protocol import SpeedUnit, SteerCommand, Telemetry, encode_steer, parse_steer, parse_telemetry
 from protocol.facts import COLLECT_SPEED_KMH
 from tools.sim.track.road import Track
 from tools.sim.vehicle.kinematic import VehicleParams, VehicleState
 
 if TYPE_CHECKING:
-    from drive_server.monitor import MonitorPolicy, MonitorReading
+    from drive_server.serving.client_monitor import MonitorPolicy, MonitorReading
     from tools.sim.driving.autopilot import Autopilot
     from tools.wire.unity_client import UnityWireClient
 
@@ -128,9 +128,9 @@ class OnnxDriver(LocalDriver):
     def __init__(self, model_path: str | Path, law: ControlLaw | None = None,
                  speed_unit: SpeedUnit | str = SpeedUnit.MPH, threads: int = 1,
                  monitor: MonitorPolicy | None = None) -> None:
-        from drive_server.model import InferenceConfig, SteeringModel
-        from drive_server.monitor import MonitorMode, MonitorPolicy
-        from drive_server.pipeline import DriveConfig, DrivePipeline
+        from drive_server.serving.client_monitor import MonitorMode, MonitorPolicy
+        from drive_server.serving.model import InferenceConfig, SteeringModel
+        from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 
         super().__init__()
         model = SteeringModel(Path(model_path), InferenceConfig(threads=threads))

@@ -11,7 +11,7 @@ import json
 import logging
 from pathlib import Path
 
-from drive_server.contract import METADATA_MODEL_INFO_KEY
+from drive_server.serving.contract import METADATA_MODEL_INFO_KEY
 from tools.sim.render.camera import DEFAULT_RIG, LEGACY_RIG, RIGS
 
 log = logging.getLogger(__name__)

@@ -24,11 +24,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIEnvironment
 
-    from drive_server.monitor import MonitorReading
+    from drive_server.serving.client_monitor import MonitorReading
 
 log = logging.getLogger(__name__)
 
-#: Page files served from drive_server/static, with their content types.
+#: Page files served from drive_server/observing/static, with their content types.
 STATIC = {"/": ("dashboard.html", "text/html; charset=utf-8"),
           "/dashboard.js": ("dashboard.js", "text/javascript; charset=utf-8"),
           "/dashboard.css": ("dashboard.css", "text/css; charset=utf-8")}
@@ -82,7 +82,7 @@ class Dashboard:
         self._ticker: object = None  # the ticker's greenthread while it runs
         self.dropped = 0  # viewers dropped for not keeping up
         self.served = 0  # viewers connected so far
-        self._files = {path: (resources.files("drive_server").joinpath("static", name).read_bytes(), kind)
+        self._files = {path: (resources.files("drive_server.observing").joinpath("static", name).read_bytes(), kind)
                        for path, (name, kind) in STATIC.items()}
 
     @property

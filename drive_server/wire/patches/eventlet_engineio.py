@@ -1,7 +1,7 @@
 """The eventlet backend's patches of eventlet, python-engineio and python-socketio internals, each a named function.
 
 The libraries are imported inside the functions: the command line imports this module (through
-:mod:`drive_server.transport`) and must not pay for, or print anything from, eventlet before it serves.
+:mod:`drive_server.wire.transport`) and must not pay for, or print anything from, eventlet before it serves.
 On an upgrade: read each function below against the new library, update ``CHECKED_VERSIONS`` and run
 ``tests/test_wire_patches.py`` and the wire tests it names.
 The three libraries ship no type information: their objects (``ws``, ``sio``, ``eio_server``) are ``Any`` here.
@@ -13,7 +13,7 @@ import inspect
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
-from drive_server.patches import PrivateName
+from drive_server.wire.patches import PrivateName
 
 if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIEnvironment

@@ -4,16 +4,42 @@ counters and recent latency, built from data the server keeps anyway (nothing is
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from drive_server.dashboard import RECENT_FRAMES
-from drive_server.stats import STAGES, summarize
+from drive_server.observing.dashboard import RECENT_FRAMES
+from drive_server.observing.stats import STAGES, summarize
 from protocol.units import to_kmh
 
 if TYPE_CHECKING:
-    from drive_server.clients import ClientState
-    from drive_server.dashboard import Dashboard
-    from drive_server.pipeline import DriveConfig, DrivePipeline
+    from drive_server.observing.dashboard import Dashboard, LiveFrame
+    from drive_server.observing.stats import LatencyStats
+    from drive_server.serving.client_monitor import ClientMonitor
+    from drive_server.serving.guard import FrameGuard
+    from drive_server.serving.pipeline import DriveConfig, DrivePipeline
+
+
+class Watched(Protocol):
+    """What the live view reads of a connected client (a ``drive_server.wire.clients.ClientState``; named so, not
+    imported: the wire sits above the observing room, ``drive_server.ALLOWED_IMPORTS``)."""
+
+    @property
+    def sid(self) -> str: ...
+
+    @property
+    def user_agent(self) -> str: ...
+
+    @property
+    def stats(self) -> LatencyStats: ...
+
+    @property
+    def guard(self) -> FrameGuard: ...
+
+    @property
+    def live(self) -> LiveFrame | None: ...
+
+    @property
+    def monitor(self) -> ClientMonitor | None: ...
 
 
 class Served(Protocol):
@@ -23,7 +49,7 @@ class Served(Protocol):
     def pipeline(self) -> DrivePipeline: ...
 
     @property
-    def clients(self) -> dict[str, ClientState]: ...
+    def clients(self) -> Mapping[str, Watched]: ...
 
     @property
     def dashboard(self) -> Dashboard | None: ...
@@ -51,7 +77,7 @@ def _monitor_view(pipeline: DrivePipeline) -> dict[str, Any] | None:
             "mode": pipeline.config.monitor.mode.value}
 
 
-def client_view(client: ClientState, cfg: DriveConfig, with_latency: bool, now: float) -> dict[str, Any]:
+def client_view(client: Watched, cfg: DriveConfig, with_latency: bool, now: float) -> dict[str, Any]:
     """One simulator's panel: latest frame (the JPEG as it was sent), counters, recent latency."""
     stats, guard = client.stats, client.guard
     entry: dict[str, Any] = {
@@ -96,7 +122,7 @@ def make_dashboard(server: Served) -> Dashboard:
     import eventlet
     import eventlet.queue
 
-    from drive_server.dashboard import Dashboard
+    from drive_server.observing.dashboard import Dashboard
 
     return Dashboard(lambda with_latency: snapshot(server, with_latency), sleep=eventlet.sleep, spawn=eventlet.spawn,
                      make_queue=lambda size: eventlet.queue.LightQueue(size))

@@ -1,9 +1,9 @@
-"""The transports' gates: where the limits of :mod:`drive_server.limits` are enforced on messages.
+"""The transports' gates: where the limits of :mod:`drive_server.wire.limits` are enforced on messages.
 
 Long-polling bodies (413 before the body is read) and WebSocket messages (a bound on the whole message
 while its frames arrive, one message per connection per turn, the time of each connection's latest
-message). The connections themselves (cap, header timeout, eviction) are :mod:`drive_server.connections`.
-See the module docstring of :mod:`drive_server.limits` for what each closes and why.
+message). The connections themselves (cap, header timeout, eviction) are :mod:`drive_server.wire.connections`.
+See the module docstring of :mod:`drive_server.wire.limits` for what each closes and why.
 """
 
 from __future__ import annotations
@@ -16,19 +16,19 @@ from time import monotonic
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs
 
-from drive_server.limits import (
+from drive_server.wire.limits import (
     CLOSE_PROTOCOL_ERROR,
     FaultLog,
     WireLimits,
     close_reason,
     packet_problem,
 )
-from drive_server.patches import eventlet_engineio as wire
+from drive_server.wire.patches import eventlet_engineio as wire
 
 if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIApplication, WSGIEnvironment
 
-    from drive_server.connections import ConnectionLimiter
+    from drive_server.wire.connections import ConnectionLimiter
 
 log = logging.getLogger(__name__)
 

@@ -7,11 +7,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drive_server.guard import FallbackPolicy
-from drive_server.limits import WireLimits
-from drive_server.model import SteeringModel
-from drive_server.stats import LatencyStats, summarize
-from drive_server.transport import TransportTuning
+from drive_server.observing.stats import LatencyStats, summarize
+from drive_server.serving.guard import FallbackPolicy
+from drive_server.serving.model import SteeringModel
+from drive_server.wire.limits import WireLimits
+from drive_server.wire.transport import TransportTuning
 
 RETIRED = "retired"
 
@@ -30,7 +30,7 @@ class ServerConfig:
     transports: tuple[str, ...] = ("polling", "websocket")  # worker processes accept websocket only
     stats_dump: Path | None = None  # raw statistics for the parent of a worker process
     limits: WireLimits = field(default_factory=WireLimits)  # connections, header timeout, replies, message size
-    dashboard: bool = False  # the read-only live view at http://HOST:PORT/ (drive_server.dashboard)
+    dashboard: bool = False  # the read-only live view at http://HOST:PORT/ (drive_server.observing.dashboard)
 
 
 def stats_document(model: SteeringModel, transport: TransportTuning, stats: list[LatencyStats],

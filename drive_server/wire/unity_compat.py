@@ -1,7 +1,7 @@
 """python-socketio's server, made to accept the Unity simulator, which never sends the CONNECT packet ``40``.
 
 Also the first check of every packet: what no Socket.IO client sends is refused before python-socketio
-parses it (see :mod:`drive_server.limits`), and a telemetry too broken to decode is still answered.
+parses it (see :mod:`drive_server.wire.limits`), and a telemetry too broken to decode is still answered.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any
 
 import socketio
 
-from drive_server.limits import TELEMETRY_EVENT, json_problem
-from drive_server.patches import eventlet_engineio as wire
+from drive_server.wire.limits import TELEMETRY_EVENT, json_problem
+from drive_server.wire.patches import eventlet_engineio as wire
 
 log = logging.getLogger(__name__)
 
@@ -41,7 +41,7 @@ class UnityCompatibleServer(socketio.Server):  # type: ignore[misc]  # python-so
         if session is None or session.closed or session.closing:
             return  # closed by the server: frames still in flight are dropped, never rejoined
         if not isinstance(data, str) or data[:1] not in ("0", "1", "2", "3"):
-            # the transports refuse these already (drive_server.limits); kept so no path can reach
+            # the transports refuse these already (drive_server.wire.limits); kept so no path can reach
             # python-socketio's binary-attachment state, which once swallowed every later frame
             self.on_protocol_error(eio_sid, "not a Socket.IO packet of type 0-3")
             return

@@ -34,7 +34,7 @@ import re
 from dataclasses import dataclass
 from time import monotonic
 
-from drive_server.stats import FaultCounters
+from drive_server.observing.stats import FaultCounters
 from protocol.errors import BadValue
 
 log = logging.getLogger(__name__)

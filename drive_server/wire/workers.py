@@ -27,12 +27,12 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
-from drive_server import listen
-from drive_server.model import SteeringModel
-from drive_server.server import DriveServer
-from drive_server.server_config import ServerConfig, stats_document
-from drive_server.stats import FaultCounters, load_stats, summarize, summary_line
-from drive_server.transport import TransportTuning
+from drive_server.observing.stats import FaultCounters, load_stats, summarize, summary_line
+from drive_server.serving.model import SteeringModel
+from drive_server.wire import listen
+from drive_server.wire.server import DriveServer
+from drive_server.wire.server_config import ServerConfig, stats_document
+from drive_server.wire.transport import TransportTuning
 from protocol.runrecords import write_json
 
 log = logging.getLogger(__name__)

@@ -1,7 +1,7 @@
 """Connections at the socket level: the cap, the header timeout, who is evicted at the cap, and closing at once.
 
 ``ConnectionLimiter`` counts open connections, remembers which are still sending their headers and when
-each upgraded WebSocket last sent something (:mod:`drive_server.gates` tells it); ``protocol_class``
+each upgraded WebSocket last sent something (:mod:`drive_server.wire.gates` tells it); ``protocol_class``
 puts the cap and the header timeout into eventlet's HTTP protocol. At the cap the oldest connection still
 sending its headers is closed, else the WebSocket silent longest past ``idle_evict_s``, else the newcomer
 is refused with a 503. ``unsent_bytes`` reads the kernel's send queue of a client that does not read.
@@ -17,7 +17,7 @@ from collections import OrderedDict
 from time import monotonic
 from typing import Protocol
 
-from drive_server.limits import FaultLog, WireLimits
+from drive_server.wire.limits import FaultLog, WireLimits
 
 if sys.platform.startswith("linux"):
     import fcntl

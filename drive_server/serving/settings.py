@@ -19,8 +19,8 @@ import json
 import math
 from dataclasses import dataclass
 
-from drive_server.smoothing import NAME as SMOOTHING
-from drive_server.smoothing import OFF, check_alpha
+from drive_server.serving.smoothing import NAME as SMOOTHING
+from drive_server.serving.smoothing import OFF, check_alpha
 from protocol.errors import BadValue
 
 #: ONNX ``metadata_props`` key of how the model is meant to be served: JSON ``{"smoothing": a, "gain": g}``.

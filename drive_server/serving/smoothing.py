@@ -7,7 +7,7 @@ output. ``alpha`` 1 is off. The state is one number per client, so one client ne
 steering, and a reconnecting simulator starts afresh.
 
 A model can carry the ``alpha`` it was measured with in its ONNX metadata (``rbc.serving``,
-``drive_server.serving``, written by a training recipe's ``smoothing``): drive_server and every tool that
+``drive_server.serving.settings``, written by a training recipe's ``smoothing``): drive_server and every tool that
 drives through its pipeline use it unless told otherwise, so a Unity user who starts ``drive_server`` with no
 flags gets what was measured. The value has one name, :data:`NAME`, from the recipe through the model's record
 and metadata to ``DriveConfig``; files written before it read under their old names (:data:`OLD_NAMES`).

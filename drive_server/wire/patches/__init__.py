@@ -28,7 +28,7 @@ from protocol.errors import UserError
 log = logging.getLogger(__name__)
 
 #: engine.io ``async_mode`` -> the module holding that backend's patches.
-BACKENDS = {"eventlet": "drive_server.patches.eventlet_engineio"}
+BACKENDS = {"eventlet": "drive_server.wire.patches.eventlet_engineio"}
 
 #: eventlet's import-time notice; it tells a user of the server nothing (the design card keeps eventlet).
 EVENTLET_DEPRECATION = r"\s*Eventlet is deprecated"

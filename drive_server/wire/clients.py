@@ -7,17 +7,17 @@ from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from drive_server.connections import unsent_bytes
-from drive_server.guard import FrameGuard
-from drive_server.limits import MAX_UNSENT_BYTES
-from drive_server.server_config import RETIRED
-from drive_server.stats import LatencyStats
+from drive_server.observing.stats import LatencyStats
+from drive_server.serving.guard import FrameGuard
+from drive_server.wire.connections import unsent_bytes
+from drive_server.wire.limits import MAX_UNSENT_BYTES
+from drive_server.wire.server_config import RETIRED
 
 if TYPE_CHECKING:
-    from drive_server.connections import TcpSocket
-    from drive_server.dashboard import LiveFrame
-    from drive_server.monitor import ClientMonitor
-    from drive_server.smoothing import SteeringSmoother
+    from drive_server.observing.dashboard import LiveFrame
+    from drive_server.serving.client_monitor import ClientMonitor
+    from drive_server.serving.smoothing import SteeringSmoother
+    from drive_server.wire.connections import TcpSocket
 
 #: Disconnected clients whose statistics are kept individually (older ones only add to the counters).
 MAX_FINISHED_CLIENTS = 64

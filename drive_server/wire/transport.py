@@ -5,7 +5,7 @@ Why: eventlet unmasks every client frame one byte at a time in Python. A Unity t
 Here it is replaced by a numpy XOR over 32-bit words.
 
 The change is narrow and checked (the reaches into eventlet and engine.io are in
-:mod:`drive_server.patches.eventlet_engineio`):
+:mod:`drive_server.wire.patches.eventlet_engineio`):
 - only OUR server's engine.io instance gets the tuned WebSocket class (other servers in the process keep
   the stock one);
 - the fast unmask is set on each WebSocket INSTANCE; eventlet's class is not modified;
@@ -25,7 +25,7 @@ import socket
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
-from drive_server.patches import eventlet_engineio as wire
+from drive_server.wire.patches import eventlet_engineio as wire
 from protocol.websocket import xor_mask
 
 if TYPE_CHECKING:

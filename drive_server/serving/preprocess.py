@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from drive_server.contract import PreprocessContract
+from drive_server.serving.contract import PreprocessContract
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
 _INTERP = {"area": cv2.INTER_AREA, "linear": cv2.INTER_LINEAR}

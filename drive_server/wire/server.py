@@ -15,29 +15,24 @@ import signal
 import warnings
 from dataclasses import replace
 from time import perf_counter
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from drive_server import listen, patches
-from drive_server.connections import ConnectionLimiter, protocol_class, shutdown_socket
-from drive_server.gates import limited_websocket_class, polling_gate
-from drive_server.guard import FrameGuard
-from drive_server.limits import (
-    CLOSE_PROTOCOL_ERROR,
-    FaultLog,
-    close_reason,
-)
-from drive_server.patches import eventlet_engineio as wire
-from drive_server.pipeline import DrivePipeline, InferenceError
-from drive_server.stats import FaultCounters, LatencyStats, save_stats, summarize, summary_line
-from drive_server.transport import install
+from drive_server.observing.stats import LatencyStats, summary_line
+from drive_server.serving.guard import FrameGuard
+from drive_server.serving.pipeline import DrivePipeline, InferenceError
+from drive_server.wire import listen, patches
+from drive_server.wire.connections import ConnectionLimiter, protocol_class, shutdown_socket
+from drive_server.wire.gates import limited_websocket_class, polling_gate
+from drive_server.wire.limits import CLOSE_PROTOCOL_ERROR, FaultLog, close_reason
+from drive_server.wire.patches import eventlet_engineio as wire
+from drive_server.wire.transport import install
 from protocol import ProtocolError, encode_steer, parse_telemetry
-from protocol.runrecords import write_json
 
 if TYPE_CHECKING:
     import socket
     from wsgiref.types import WSGIEnvironment
 
-    from drive_server.recorder import Recorder
+    from drive_server.observing.recorder import Recorder
 
 warnings.filterwarnings("ignore", message=r"\s*Eventlet is deprecated")  # printed on import; says nothing to users
 import eventlet  # noqa: E402
@@ -45,11 +40,12 @@ import eventlet.greenio  # noqa: E402
 import eventlet.wsgi  # noqa: E402
 import socketio  # noqa: E402
 
-from drive_server import live  # noqa: E402
-from drive_server.clients import ClientHistory, ClientState  # noqa: E402
-from drive_server.dashboard import LiveFrame  # noqa: E402
-from drive_server.server_config import ServerConfig, stats_document  # noqa: E402
-from drive_server.unity_compat import UnityCompatibleServer  # noqa: E402
+from drive_server.observing import live  # noqa: E402
+from drive_server.observing.dashboard import LiveFrame  # noqa: E402
+from drive_server.wire.clients import ClientState  # noqa: E402
+from drive_server.wire.server_config import ServerConfig  # noqa: E402
+from drive_server.wire.server_stats import ServerStats  # noqa: E402
+from drive_server.wire.unity_compat import UnityCompatibleServer  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +55,7 @@ SESSION_LOG_INTERVAL_S, SESSION_LOG_BURST = 10.0, 20  # connect/disconnect lines
 #: Connection slots beyond ``max_connections`` in eventlet's pool, so refusals are answered at once
 #: instead of waiting in the accept queue behind a full pool.
 SPARE_SLOTS = 64
-#: engine.io's async backend; its patches of library internals are ``drive_server.patches.BACKENDS[ASYNC_MODE]``.
+#: engine.io's async backend; its patches of library internals are ``drive_server.wire.patches.BACKENDS[ASYNC_MODE]``.
 ASYNC_MODE = "eventlet"
 #: Bad-input kind of a ``ProtocolError`` by the field it names (``exc.field``; the wording of its message is for
 #: people and may change); any other field is a bad ``payload``.
@@ -81,8 +77,9 @@ class DriveServer:
         )
         self.transport = install(self.sio.eio, config.transport)
         self.limits = config.limits
-        self.faults = FaultCounters()
-        self.fault_log = FaultLog(self.faults, WARN_INTERVAL_S)
+        self.clients: dict[str, ClientState] = {}
+        self.stats = ServerStats(config, pipeline, self.transport, self.clients)
+        self.fault_log = FaultLog(self.stats.faults, WARN_INTERVAL_S)
         # a client can reconnect in a loop: its connect/disconnect lines are bounded like its faults
         self.session_log = FaultLog(None, SESSION_LOG_INTERVAL_S, logging.INFO, SESSION_LOG_BURST, log)
         eio = self.sio.eio
@@ -90,12 +87,8 @@ class DriveServer:
         wire.wrap_websocket_class(eio, lambda base: limited_websocket_class(base, self.limiter))
         self.sio.on_bad_telemetry = self._on_bad_telemetry
         self.sio.on_protocol_error = self._on_protocol_error
-        self.clients: dict[str, ClientState] = {}
-        self.history = ClientHistory()
-        self._logged_upto: dict[str, int] = {}
         self._stop = False
         self._sock: eventlet.greenio.GreenSocket | None = None  # eventlet has no stubs: Any to mypy
-        self._logged_frames = -1
         self.recorder: Recorder | None = None  # with --record: gets every answered frame
         self.sio.on("connect", self._on_connect)
         self.sio.on("disconnect", self._on_disconnect)
@@ -115,8 +108,7 @@ class DriveServer:
     def _on_disconnect(self, sid: str, reason: object = None) -> None:
         client = self.clients.pop(sid, None)
         if client is not None:
-            for name in self.history.add(client.stats):
-                self._logged_upto.pop(name, None)
+            self.stats.client_left(client.stats)
             self.session_log.report("disconnect", "client %s disconnected (%s): %s", sid, reason,
                                     summary_line(client.stats.summary()))
 
@@ -233,31 +225,13 @@ class DriveServer:
                               client.stats.bad_output, count=False)
 
     # -- statistics ------------------------------------------------------------------------------
-    def all_stats(self) -> list[LatencyStats]:
-        return [*self.history.all_stats(), *(c.stats for c in self.clients.values())]
-
-    def stats_document(self) -> dict[str, Any]:
-        return stats_document(self.pipeline.model, self.transport, self.all_stats(), faults=self.faults.as_dict(),
-                              limits=self.limits)
-
-    def write_stats(self) -> None:
-        if self.config.stats_dump is not None:
-            save_stats(self.config.stats_dump, self.all_stats())
-            write_json(self.config.stats_dump.with_suffix(".faults.json"), self.faults.as_dict(), sort_keys=True)
-        if self.config.stats_json is not None:
-            write_json(self.config.stats_json, self.stats_document(), sort_keys=True)
-
     def _log_loop(self) -> None:
         """Every ``log_every_s``: counters since start, percentiles of the frames since the last line."""
         while not self._stop:
             self.sio.sleep(self.config.log_every_s)
-            stats = self.all_stats()
-            frames = sum(s.frames + s.malformed + s.manual for s in stats)
-            if frames != self._logged_frames:
-                self._logged_frames = frames
-                line = summary_line(summarize(stats, since=self._logged_upto))
-                self._logged_upto = {s.name: s.recorded for s in stats}
-                log.info("%d client(s): %s", len(self.clients), line)
+            line = self.stats.progress_line()
+            if line is not None:
+                log.info("%s", line)
 
     # -- running ---------------------------------------------------------------------------------
     def stop(self, *_: object) -> None:
@@ -310,7 +284,5 @@ class DriveServer:
             for s, handler in previous.items():
                 signal.signal(s, handler)
             server.kill()
-            total = summarize(self.all_stats())
-            faults = ", ".join(f"{kind} {n}" for kind, n in self.faults.as_dict().items())
-            log.info("stopped: %s%s", summary_line(total), f" | refused/closed: {faults}" if faults else "")
-            self.write_stats()
+            log.info("stopped: %s", self.stats.final_line())
+            self.stats.write()

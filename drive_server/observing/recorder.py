@@ -29,7 +29,7 @@ from protocol import SteerCommand
 from protocol.datalog_writer import IMAGE_DIR, LOG_NAME, LogWriter, frame_name, last_row_stamp
 
 if TYPE_CHECKING:
-    from drive_server.monitor import MonitorReading
+    from drive_server.serving.client_monitor import MonitorReading
 
 log = logging.getLogger(__name__)
 

@@ -12,21 +12,20 @@ from time import perf_counter
 
 import numpy as np
 
-from drive_server.control import ControlLaw
-from drive_server.model import SteeringModel
-from drive_server.monitor import (
+from drive_server.serving.client_monitor import (
     ClientMonitor,
     Level,
-    MonitorGraph,
     MonitorPolicy,
     MonitorReading,
-    MonitorSpec,
     act_on,
     at_frame_rate,
 )
-from drive_server.preprocess import jpeg_reduction, preprocess
-from drive_server.serving import check_gain
-from drive_server.smoothing import OFF, SteeringSmoother, check_alpha
+from drive_server.serving.control import ControlLaw
+from drive_server.serving.model import SteeringModel
+from drive_server.serving.monitor import MonitorGraph, MonitorSpec
+from drive_server.serving.preprocess import jpeg_reduction, preprocess
+from drive_server.serving.settings import check_gain
+from drive_server.serving.smoothing import OFF, SteeringSmoother, check_alpha
 from protocol import ProtocolError, SpeedUnit, SteerCommand, Telemetry, decode_image, to_kmh
 from protocol.errors import UserError
 
@@ -39,7 +38,7 @@ class InferenceError(UserError, RuntimeError):
 class DriveConfig:
     """The control law (Eq. 14), the unit of the telemetry speed (mph: the stock simulator), the gain on the
     network's steering and the weight of each new output in the per-client smoothing of the steering
-    (``drive_server.serving``; None: what the model's metadata asks for, gain 1 and smoothing off for a model
+    (``drive_server.serving.settings``; None: what the model's metadata asks for, gain 1 and smoothing off for a model
     without)."""
 
     law: ControlLaw = ControlLaw()

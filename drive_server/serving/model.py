@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-from drive_server.contract import METADATA_KEY, ContractError, PreprocessContract, infer_contract
-from drive_server.monitor import MonitorGraph, MonitorSpec, read_monitor
-from drive_server.serving import SERVING_KEY, Serving
+from drive_server.serving.contract import METADATA_KEY, ContractError, PreprocessContract, infer_contract
+from drive_server.serving.monitor import MonitorGraph, MonitorSpec, read_monitor
+from drive_server.serving.settings import SERVING_KEY, Serving
 from protocol.errors import BadValue, UserError
 
 log = logging.getLogger(__name__)
@@ -89,7 +89,7 @@ class SteeringModel:
         self.input_name, self.output_name = inp.name, outputs[0].name
         self.input_shape = tuple(inp.shape)
         self.contract, self.contract_source = self._contract()
-        try:  # the steering gain and smoothing the model was measured with (drive_server.serving)
+        try:  # the steering gain and smoothing the model was measured with (drive_server.serving.settings)
             self.serving = Serving.from_json(self._session.get_modelmeta().custom_metadata_map.get(SERVING_KEY))
         except ValueError as exc:
             raise ModelError(f"{path.name}: {exc}") from None
@@ -135,7 +135,7 @@ class SteeringModel:
         function and at the decode scale serving uses, that the contract works on this input and that
         the output is one finite value: a model that answers NaN is refused here, not on every frame.
         """
-        from drive_server.preprocess import jpeg_reduction, preprocess
+        from drive_server.serving.preprocess import jpeg_reduction, preprocess
         from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
 
         reduce = jpeg_reduction(self.contract)

@@ -51,7 +51,7 @@ class PreprocessContract:
     as float32 in ``layout``. The paper's default is 64x64 RGB with x/255 - 0.5.
     ``decode_reduce``: decode the JPEG at 1/n size (libjpeg's DCT scaling) even where the crop then has
     fewer rows than the network (half the decode and resize cost); 0: the serving rule chooses
-    (``drive_server.preprocess.jpeg_reduction``: never below the network's resolution).
+    (``drive_server.serving.preprocess.jpeg_reduction``: never below the network's resolution).
     ``blank_columns``: the outer n columns on each side of the network image repeat the next column
     inward. A model trained on turned views needs it: their missing edge would otherwise tell the
     network the turn, a cue a real camera never shows (0: off).
