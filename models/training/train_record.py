@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict
+
 import torch
 
 from models.data.behavior import Pipeline

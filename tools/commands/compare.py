@@ -9,7 +9,7 @@ from pathlib import Path
 
 from protocol.runrecords import write_text
 from tools.errors import CommandError
-from tools.evaluate.compare import build_table, evaluated_model, measure_latency, training_summary
+from tools.evaluate.compare import Column, build_table, evaluated_model, measure_latency, training_summary
 from tools.evaluate.evalrecord import EvalRecord
 
 log = logging.getLogger("rbc.compare")
@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     runs = args.runs or [None] * len(args.evals)
     if len(labels) != len(args.evals) or len(runs) != len(args.evals):
         raise CommandError("give as many --label and --train-run as --eval (or none)")
-    columns = []
+    columns: list[Column] = []
     for label, eval_dir, run_dir in zip(labels, args.evals, runs, strict=True):
         results = EvalRecord.load(eval_dir)
         model = evaluated_model(results)

@@ -10,8 +10,9 @@ from __future__ import annotations
 import json
 import logging
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from models.networks.runfiles import HISTORY, RunPaths, RunRecord, read_history
 from protocol.runrecords import file_sha256
@@ -47,27 +48,61 @@ def paper_table10() -> dict[str, dict[str, str]]:
                              PAPER_TABLE10_RANGES[column].items()} for column, cells in PAPER_TABLE10.items()}
 
 
-def training_summary(run_dir: Path | None) -> dict[str, Any]:
+class TrainingBudget(TypedDict, total=False):
+    """What a column says of its model's training (nothing where the run is not given)."""
+
+    arch: str | None
+    approach: str | None
+    epochs: int | None
+    steps_per_epoch: int | None
+    batch_size: int | None
+    aug_loops: int | None
+    seconds: float  # the wall seconds of its epochs
+    val_mse: float  # the last epoch's
+
+
+class LatencySummary(TypedDict):
+    """drive_server's decode-to-command time (its stats' ``total`` stage: p50, p99, max ...; {} where the server
+    wrote none) and the Unity-wire round trip (p50, p99, max), in ms."""
+
+    server_total_ms: dict[str, float]
+    round_trip_ms: dict[str, float]
+
+
+class Column(TypedDict):
+    """One evaluated model of the comparison (``rbc compare``'s JSON holds the list)."""
+
+    label: str
+    eval_dir: str
+    model: str
+    model_sha256: str
+    summary: dict[str, Any]  # the evaluation's summary (results.json), by experiment
+    training_time_s: float | None
+    training: TrainingBudget
+    latency: LatencySummary
+
+
+def training_summary(run_dir: Path | None) -> TrainingBudget:
     """Budget (config.json), wall seconds and final validation MSE (history.csv) of a training run.
 
     The budget makes unequal schedules visible in the table; an empty dict when nothing is known.
     """
     if run_dir is None:
         return {}
-    out: dict[str, Any] = {}
+    out: TrainingBudget = {}
     paths = RunPaths(run_dir)
     if paths.config.is_file():
         run = RunRecord.load(run_dir)
         cfg, resolved = run.config, run.resolved
-        out.update(arch=cfg.get("arch"), approach=cfg.get("approach"), epochs=resolved.get("epochs"),
-                   steps_per_epoch=resolved.get("steps_per_epoch"), batch_size=cfg.get("batch_size"),
-                   aug_loops=cfg.get("aug_loops"))
+        out.update({"arch": cfg.get("arch"), "approach": cfg.get("approach"), "epochs": resolved.get("epochs"),
+                    "steps_per_epoch": resolved.get("steps_per_epoch"), "batch_size": cfg.get("batch_size"),
+                    "aug_loops": cfg.get("aug_loops")})
     if not paths.history.is_file():
         log.warning("no %s in %s: training time unknown", HISTORY, run_dir)
         return out
     rows = read_history(paths.history)
     if rows:
-        out.update(seconds=sum(r.seconds for r in rows), val_mse=rows[-1].val_loss)
+        out.update({"seconds": sum(r.seconds for r in rows), "val_mse": rows[-1].val_loss})
     return out
 
 
@@ -76,15 +111,16 @@ def training_time_s(run_dir: Path | None) -> float | None:
     return training_summary(run_dir).get("seconds")
 
 
-def _fmt_budget(train: dict[str, Any]) -> str:
-    if not train.get("epochs") or not train.get("steps_per_epoch") or not train.get("batch_size"):
+def _fmt_budget(train: TrainingBudget) -> str:
+    epochs, steps_per_epoch, batch_size = train.get("epochs"), train.get("steps_per_epoch"), train.get("batch_size")
+    if not epochs or not steps_per_epoch or not batch_size:
         return "n/a"
-    samples = train["epochs"] * train["steps_per_epoch"] * train["batch_size"]
-    steps = f"{train['epochs']} × {train['steps_per_epoch']} steps of {train['batch_size']}"
+    samples = epochs * steps_per_epoch * batch_size
+    steps = f"{epochs} × {steps_per_epoch} steps of {batch_size}"
     return f"{steps} ({samples / 1e6:.2f} M samples)"
 
 
-def measure_latency(model: Path, frames: int) -> dict[str, Any]:
+def measure_latency(model: Path, frames: int) -> LatencySummary:
     """Serve ``model`` with drive_server and drive it with the Unity-wire client; server stats + round trip."""
     import numpy as np
 
@@ -107,14 +143,14 @@ def _fmt_time(seconds: float | None) -> str:
     return f"{seconds / 60:.1f} min" if seconds < 3600 else f"{seconds / 3600:.2f} hr"
 
 
-def _fmt_latency(lat: dict[str, Any]) -> str:
+def _fmt_latency(lat: LatencySummary) -> str:
     total = lat.get("server_total_ms") or {}
     rt = lat["round_trip_ms"]
     server = f"server {total['p50']:.2f} ms (p99 {total['p99']:.2f}, max {total['max']:.1f})" if total else ""
     return f"{server}; round trip {rt['p50']:.2f} ms (p99 {rt['p99']:.2f})".lstrip("; ")
 
 
-def build_table(columns: list[dict[str, Any]], with_paper: bool = True) -> str:
+def build_table(columns: Sequence[Column], with_paper: bool = True) -> str:
     head = ["Parameter"] + [c["label"] for c in columns]
     paper = list(paper_table10().items()) if with_paper else []
     head += [name for name, _ in paper]

@@ -8,12 +8,16 @@ The paper's ranges, where it gives them, are drawn hatched for comparison.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from protocol.runrecords import atomic_path
 from tools.evaluate.experiments import EXPERIMENTS
 from tools.evaluate.paper import PAPER_TABLE10_RANGES
+
+if TYPE_CHECKING:
+    from tools.evaluate.compare import Column
 
 log = logging.getLogger(__name__)
 
@@ -29,7 +33,7 @@ def measured_range(entry: dict[str, Any] | None) -> tuple[float, float, bool, bo
     return lo["limit"] - origin, hi["limit"] - origin, bool(lo.get("hit_cap")), bool(hi.get("hit_cap"))
 
 
-def plot_ranges(columns: list[dict[str, Any]], path: Path, with_paper: bool = True) -> Path | None:
+def plot_ranges(columns: Sequence[Column], path: Path, with_paper: bool = True) -> Path | None:
     """Draw the chart for ``columns`` (label + eval summary each); None without matplotlib."""
     try:
         import matplotlib
