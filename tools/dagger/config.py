@@ -45,7 +45,7 @@ class DaggerConfig:
     max_steps_per_epoch: int | None = None  # instead of the recipe's (tests: a few steps)
     eval_worlds: int = 20  # unseen generated worlds from the evaluation range, one lap each
     eval_world_seed: int | None = None  # the first of them (None: the start of the evaluation range)
-    eval_world_config: dict[str, Any] | None = None  # WorldGenConfig fields of the evaluation worlds (None: defaults)
+    eval_world_config: dict[str, object] | None = None  # WorldGenConfig fields of the evaluation worlds (None: default)
     tracks: tuple[str, ...] = TRACKS  # built-in tracks scored too, one lap each
     perturbations: bool = False  # also Table 9's orientation and light rows on lake (range searches)
     laps: int = 1  # laps per evaluation run
@@ -128,7 +128,7 @@ class DaggerConfig:
         first = world_seed_range("eval").start if self.eval_world_seed is None else self.eval_world_seed
         return list(range(first, first + self.eval_worlds))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         out = asdict(self)
         out["budgets"] = list(self.budgets)
         out["tracks"] = list(self.tracks)
@@ -149,8 +149,8 @@ class DaggerConfig:
     def same_run(self, other: DaggerConfig) -> bool:
         """Whether ``other`` continues this run: every setting equal, its budgets this run's or more."""
         mine, theirs = self.to_dict(), other.to_dict()
-        budgets, more = mine.pop("budgets"), theirs.pop("budgets")
-        return mine == theirs and more[:len(budgets)] == budgets
+        del mine["budgets"], theirs["budgets"]
+        return mine == theirs and other.budgets[:len(self.budgets)] == self.budgets
 
 
 def budgets_from(rounds: int, frames_per_round: int) -> tuple[int, ...]:

@@ -28,16 +28,15 @@ from __future__ import annotations
 import logging
 import shutil
 import time
-from collections.abc import Callable
-from dataclasses import asdict
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
 
 from models.networks.runfiles import EpochRow, RunPaths, RunRecord
 from protocol.codeversion import ROOT, code_digest
 from protocol.errors import BadValue
 from protocol.runrecords import code_version, file_sha256, read_json, write_json
 from tools.dagger.config import DaggerConfig
+from tools.dagger.records import RoundRecord, RoundScores, TrainingSummary
 from tools.dagger.rollout import SUMMARY, CollectionStats, collect_round, read_stats
 from tools.dagger.summary import write_summary
 from tools.sim.driving.rules import TARGET_ETA
@@ -67,7 +66,7 @@ def run_key(config: DaggerConfig) -> dict[str, str]:
     return {"recipe_sha256": file_sha256(find_recipe(config.recipe)), "code": code_digest(RUN_ENTRY, root=CODE_ROOT)}
 
 
-def prepare_run(config: DaggerConfig, out: Path, resume: bool) -> dict[str, Any]:
+def prepare_run(config: DaggerConfig, out: Path, resume: bool) -> dict[str, object]:
     """Check or start ``OUT/dagger.json``; a resume must find the same settings (more budgets may follow), the same
     recipe and the same code (:func:`run_key`)."""
     run_file = out / RUN_FILE
@@ -105,14 +104,15 @@ def eval_worlds(config: DaggerConfig, out: Path) -> list[tuple[int, str]]:
 
 
 def run(config: DaggerConfig, out: Path, resume: bool = False, workers: int = 1, threads: int | None = None,
-        progress: bool = True, on_round: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+        progress: bool = True, on_round: Callable[[RoundRecord], None] | None = None) -> list[RoundRecord]:
     """Every round of ``config`` in ``out``; the rounds' records (finished ones read back, not redone)."""
     out = Path(out)
     prepare_run(config, out, resume)
     worlds = eval_worlds(config, out)
-    records: list[dict[str, Any]] = []
+    records: list[RoundRecord] = []
     for r in range(config.rounds):
         path = round_dir(out, r) / RECORD
+        record: RoundRecord
         if path.is_file():
             record = read_json(path)
             log.info("round %d/%d: finished earlier (%d expert frames, worst world %.1f %%)", r + 1, config.rounds,
@@ -127,7 +127,7 @@ def run(config: DaggerConfig, out: Path, resume: bool = False, workers: int = 1,
 
 
 def run_round(config: DaggerConfig, out: Path, r: int, worlds: list[tuple[int, str]], workers: int = 1,
-              threads: int | None = None, progress: bool = True) -> dict[str, Any]:
+              threads: int | None = None, progress: bool = True) -> RoundRecord:
     """Collect, train and score round ``r``; write and return its record."""
     from tools.console import Progress, RunProgress
     from tools.dagger.scoring import evaluate_model, runs_planned
@@ -186,7 +186,7 @@ def train_dir(out: Path, round_: int) -> Path:
 
 
 def train_round(config: DaggerConfig, out: Path, r: int, threads: int | None = None,
-                progress: bool = True) -> dict[str, Any]:
+                progress: bool = True) -> TrainingSummary:
     """Train round ``r``'s model on the data of rounds 0..r (``rbc train``'s pipeline); continue an interrupted
     training from its checkpoint. What the record keeps of it."""
     from models.training.recipe import load_recipe
@@ -225,12 +225,12 @@ def _relative(path: str, out: Path) -> str:
 
 
 def make_record(config: DaggerConfig, r: int, stats: CollectionStats, learner: Path | None,
-                training: dict[str, Any], model: Path, scores: dict[str, Any]) -> dict[str, Any]:
+                training: TrainingSummary, model: Path, scores: RoundScores) -> RoundRecord:
     worlds = scores.get("worlds")
     return {
         "round": r, "mode": config.mode, "beta": config.beta(r),
         "frames_new": stats.frames, "expert_frames": config.budgets[r],
-        "collection": asdict(stats) | {"world_seeds": list(stats.world_seeds)},
+        "collection": stats.as_record(),
         "learner_sha256": file_sha256(learner) if learner else None,
         "training": training, "model": model.relative_to(model.parents[2]).as_posix(),
         "model_sha256": file_sha256(model),
@@ -241,7 +241,7 @@ def make_record(config: DaggerConfig, r: int, stats: CollectionStats, learner: P
     }
 
 
-def headline(record: dict[str, Any]) -> str:
+def headline(record: RoundRecord) -> str:
     """``worlds 91.2 % mean, worst 80.1 % (world 1000004), 17/20 at >= 95 %; lake 100.0 %, mountain 96.5 %``."""
     ev = record["eval"]
     parts = []
@@ -253,6 +253,6 @@ def headline(record: dict[str, Any]) -> str:
     return "; ".join(parts)
 
 
-def comparable(record: dict[str, Any]) -> dict[str, Any]:
+def comparable(record: Mapping[str, object]) -> dict[str, object]:
     """A record without what may differ between a clean and a resumed run (wall times)."""
     return {k: v for k, v in record.items() if k != "timing"}

@@ -14,6 +14,7 @@ from typing import Any
 from protocol.errors import BadValue
 from protocol.runrecords import code_version, read_json, write_json, write_text
 from tools.dagger.config import DaggerConfig
+from tools.dagger.records import BestRound, Verdict, VerdictFrames
 from tools.dagger.summary import SUMMARY_JSON
 from tools.sim.driving.rules import TARGET_ETA
 
@@ -34,34 +35,32 @@ def frames_to_target(rows: list[dict[str, Any]]) -> int | None:
                 None)
 
 
-def verdict(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> dict[str, Any]:
+def verdict(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> Verdict:
     """Issue #46's target: DAgger drives every unseen world at >= 95 % with at most a third of the expert frames
     behavioral cloning needs for the same (or, where BC never gets there, a third of the most it was given)."""
     d, b = frames_to_target(dagger), frames_to_target(bc)
     most_bc = max((r["expert_frames"] for r in bc), default=0)
     bound = b if b is not None else most_bc
-    out: dict[str, Any] = {"target_eta": TARGET_ETA, "dagger_frames": d, "bc_frames": b, "bc_most_frames": most_bc,
-                           "bc_reached": b is not None}
-    out["met"] = d is not None and bound > 0 and 3 * d <= bound
+    met = d is not None and bound > 0 and 3 * d <= bound
+    head: VerdictFrames = {"target_eta": TARGET_ETA, "dagger_frames": d, "bc_frames": b, "bc_most_frames": most_bc,
+                           "bc_reached": b is not None, "met": met}
     if d is None:
         best = max(dagger, key=lambda r: (r.get("worlds_at_target", 0), r.get("worlds_worst", 0)), default=None)
-        out["dagger_best"] = None if best is None else {
+        top: BestRound | None = None if best is None else {
             "expert_frames": best["expert_frames"], "worlds_at_target": best.get("worlds_at_target"),
             "worlds_n": best.get("worlds_n"), "worst": best.get("worlds_worst")}
-        top = out["dagger_best"]
-        out["text"] = (f"missed: DAgger drove every unseen world at >= {TARGET_ETA:.0f} % at none of its budgets "
-                       f"(best: {top['worlds_at_target']}/{top['worlds_n']} worlds, worst {top['worst']:.1f} %, at "
-                       f"{top['expert_frames']:,} frames)" if top else "missed: no DAgger round")
-    else:
-        ratio = d / bound if bound else float("inf")
-        out["ratio"] = round(ratio, 3)
-        bc_text = f"BC at {b:,}" if b is not None else f"BC never within {most_bc:,}"
-        out["text"] = (f"{'met' if out['met'] else 'missed'}: DAgger at {d:,} expert frames, {bc_text} "
-                       f"({'at most ' if b is None else ''}{ratio:.2f}x the frames; the target is <= 0.33x)")
-    return out
+        text = (f"missed: DAgger drove every unseen world at >= {TARGET_ETA:.0f} % at none of its budgets "
+                f"(best: {top['worlds_at_target']}/{top['worlds_n']} worlds, worst {top['worst']:.1f} %, at "
+                f"{top['expert_frames']:,} frames)" if top else "missed: no DAgger round")
+        return {**head, "dagger_best": top, "text": text}
+    ratio = d / bound if bound else float("inf")
+    bc_text = f"BC at {b:,}" if b is not None else f"BC never within {most_bc:,}"
+    text = (f"{'met' if met else 'missed'}: DAgger at {d:,} expert frames, {bc_text} "
+            f"({'at most ' if b is None else ''}{ratio:.2f}x the frames; the target is <= 0.33x)")
+    return {**head, "ratio": round(ratio, 3), "text": text}
 
 
-def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, Any]:
+def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, object]:
     """Write ``out/comparison.md``, ``comparison.json`` and ``curve.png``; return the comparison."""
     mode_d, dagger, sum_d = load_rows(dagger_dir)
     mode_b, bc, sum_b = load_rows(bc_dir)
@@ -76,11 +75,12 @@ def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, Any]:
         raise BadValue(f"the two runs differ in more than who drove: {', '.join(diff)}",
                        "run both with the same --recipe, --seed, evaluation worlds and tracks")
     out.mkdir(parents=True, exist_ok=True)
-    result = {"verdict": verdict(dagger, bc), "rows": merged_rows(dagger, bc), "dagger_dir": str(dagger_dir),
+    found = verdict(dagger, bc)
+    result = {"verdict": found, "rows": merged_rows(dagger, bc), "dagger_dir": str(dagger_dir),
               "bc_dir": str(bc_dir), "config": sum_d["config"], "bc_config": sum_b["config"],
               "seed": sum_d["seed"], "code_version": code_version()}
     write_json(out / "comparison.json", result)
-    write_text(out / "comparison.md", comparison_table(dagger, bc) + "\n" + result["verdict"]["text"] + "\n")
+    write_text(out / "comparison.md", comparison_table(dagger, bc) + "\n" + found["text"] + "\n")
     plot_curve(dagger, bc, out / CURVE)
     return result
 

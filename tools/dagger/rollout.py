@@ -26,7 +26,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,7 +45,9 @@ if TYPE_CHECKING:
     import gymnasium as gym
 
     from tools.dagger.mixing import ExpertMixing
+    from tools.dagger.records import CollectionRecord
     from tools.envs import OnnxPolicy
+    from tools.envs.policy import Observation
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +74,12 @@ class CollectionStats:
     takeovers: int = 0  # take-overs while collecting (the referee put the car back)
     abs_disagreement: float = 0.0  # mean |learner - expert| steering over the steps the learner was asked
     world_seeds: tuple[int, ...] = ()
+
+    def as_record(self) -> CollectionRecord:
+        """The stats as a round's record keeps them (every field, the seeds as a list)."""
+        return {"frames": self.frames, "episodes": self.episodes, "expert_steps": self.expert_steps,
+                "learner_steps": self.learner_steps, "takeovers": self.takeovers,
+                "abs_disagreement": self.abs_disagreement, "world_seeds": list(self.world_seeds)}
 
 
 def episodes(config: DaggerConfig, round_: int, count: int) -> list[Episode]:
@@ -137,7 +145,7 @@ def collect_round(config: DaggerConfig, round_: int, out: Path, learner: Path | 
     return stats
 
 
-def _make_env(config: DaggerConfig, episode: Episode, law: ControlLaw) -> gym.Env[Any, Any]:
+def _make_env(config: DaggerConfig, episode: Episode, law: ControlLaw) -> gym.Env[Observation, np.ndarray]:
     """``rbc/Drive-v0`` on the episode's training world; a take-over puts the car back and the episode goes on."""
     import gymnasium
 
@@ -168,7 +176,7 @@ class _Recorder:
         self.rows.writerow(FRAMES_COLUMNS)
 
 
-def _drive_episode(env: ExpertMixing, policy: OnnxPolicy | None, config: DaggerConfig, number: int,
+def _drive_episode(env: ExpertMixing[Observation], policy: OnnxPolicy | None, config: DaggerConfig, number: int,
                    episode: Episode, hz: float, recorder: _Recorder) -> None:
     """One episode: the learner (when there is one) is asked every step, the wrapper decides who drives and
     labels the frame; the frame, its label and what happened are recorded."""

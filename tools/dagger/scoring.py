@@ -13,12 +13,13 @@ from __future__ import annotations
 import json
 import logging
 import statistics
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from protocol.runrecords import file_sha256, read_json, write_json, write_text
 from tools.dagger.config import PERTURBATIONS, DaggerConfig
+from tools.dagger.records import RangeScore, RoundScores, TrackScore
 from tools.evaluate.experiments import is_autonomous, run_eta
 from tools.evaluate.journal import run_code
 from tools.evaluate.runner import DriverSpec, Runner, read_journal
@@ -48,12 +49,12 @@ def runs_planned(config: DaggerConfig) -> int:
     return config.eval_worlds + len(config.tracks)
 
 
-def _interventions(record: dict[str, Any]) -> int:
+def _interventions(record: Mapping[str, Any]) -> int:
     return sum(lap.get("n_interventions", len(lap.get("interventions") or [])) for lap in record["laps"])
 
 
 def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list[tuple[int, str]], workers: int = 1,
-                   on_result: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+                   on_result: Callable[[dict[str, Any]], None] | None = None) -> RoundScores:
     """Score ``model`` on ``worlds`` (seed, track file), ``config.tracks`` and (``config.perturbations``) Table 9's
     orientation and light rows; the runs are journaled in ``folder/runs.jsonl`` and reused from there."""
     from tools.sim.driving.model_rig import model_rig
@@ -65,7 +66,7 @@ def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list
     base = SuiteConfig(behavior="simplistic", seeds=1, base_seed=0, laps=config.laps,
                        speed_limit_kmh=config.speed_limit_kmh, camera=rig, map_dir=str(folder / "failures"))
 
-    def suite(**changes: Any) -> dict[str, Any]:
+    def suite(**changes: object) -> dict[str, Any]:
         reuse = read_journal(journal)
         # keep only whole lines: a run cut short by a kill is driven again and appended after them
         write_text(journal, "".join(json.dumps(r) + "\n" for r in reuse.values()))
@@ -76,7 +77,7 @@ def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list
         finally:
             runner.close()
 
-    result: dict[str, Any] = {"camera_rig": rig}
+    result: RoundScores = {"camera_rig": rig}
     if worlds:
         summary = suite(experiments=("unseen_worlds",), worlds=tuple(worlds))
         entry = summary["unseen_worlds"]
@@ -87,7 +88,7 @@ def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list
             "takeovers": sum(w["interventions"] for w in entry["worlds"]),
             "per_world": [{"seed": w["seed"], "eta": round(w["eta"], 3), "takeovers": w["interventions"]}
                           for w in entry["worlds"]]}
-    tracks: dict[str, Any] = {}
+    tracks: dict[str, TrackScore] = {}
     for track in config.tracks:
         summary = suite(experiments=("no_variation",), track=track)
         record = summary["_records"][0]  # driven now or reused from the journal
@@ -104,16 +105,17 @@ def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list
     return result
 
 
-def _range(entry: dict[str, Any]) -> dict[str, Any]:
+def _range(entry: dict[str, Any]) -> RangeScore:
     """A range search's result as Table 9 prints it: the autonomous range around the default (None: empty)."""
     if entry.get("empty"):
         return {"lower": None, "upper": None, "unit": entry["unit"], "empty": True, "text": "none"}
     from tools.evaluate.report import format_cell
 
-    out: dict[str, Any] = {"unit": entry["unit"], "text": format_cell(entry)}
-    for side in ("lower", "upper"):
-        found = entry.get(side) or {}
-        limit = found.get("limit")
-        out[side] = None if limit is None else round(limit - entry["origin"], 6)
-        out[f"{side}_at_cap"] = bool(found.get("hit_cap"))
-    return out
+    lower, upper = entry.get("lower") or {}, entry.get("upper") or {}
+    return {"unit": entry["unit"], "text": format_cell(entry),
+            "lower": _offset(lower.get("limit"), entry["origin"]), "lower_at_cap": bool(lower.get("hit_cap")),
+            "upper": _offset(upper.get("limit"), entry["origin"]), "upper_at_cap": bool(upper.get("hit_cap"))}
+
+
+def _offset(limit: float | None, origin: float) -> float | None:
+    return None if limit is None else round(limit - origin, 6)

@@ -5,20 +5,22 @@ Written by :mod:`tools.dagger.loop` after every round, read by :mod:`tools.dagge
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 from protocol.runrecords import code_version, write_json, write_text
 from tools.dagger.config import PERTURBATIONS, DaggerConfig
+from tools.dagger.records import RoundRecord
 
 SUMMARY_JSON = "summary.json"
 SUMMARY_MD = "rounds.md"
 
 
-def round_row(record: dict[str, Any]) -> dict[str, Any]:
-    """One line of the summary: the figures a curve or a table needs."""
+def round_row(record: RoundRecord) -> dict[str, object]:
+    """One line of the summary: the figures a curve or a table needs (``NAME_eta`` and ``NAME_takeovers`` per
+    track: the keys depend on the run)."""
     ev = record["eval"]
-    row = {"round": record["round"], "mode": record["mode"], "beta": record["beta"],
+    row: dict[str, object] = {"round": record["round"], "mode": record["mode"], "beta": record["beta"],
            "expert_frames": record["expert_frames"], "learner_steps": record["collection"]["learner_steps"],
            "collection_takeovers": record["collection"]["takeovers"]}
     if "worlds" in ev:
@@ -34,7 +36,7 @@ def round_row(record: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def write_summary(out: Path, config: DaggerConfig, records: list[dict[str, Any]]) -> None:
+def write_summary(out: Path, config: DaggerConfig, records: Sequence[RoundRecord]) -> None:
     """``summary.json`` (every round's row, the config, the code version) and ``rounds.md`` (the table)."""
     rows = [round_row(r) for r in records]
     write_json(out / SUMMARY_JSON, {"mode": config.mode, "config": config.to_dict(), "seed": config.seed,
@@ -42,7 +44,7 @@ def write_summary(out: Path, config: DaggerConfig, records: list[dict[str, Any]]
     write_text(out / SUMMARY_MD, rounds_table(rows))
 
 
-def rounds_table(rows: list[dict[str, Any]]) -> str:
+def rounds_table(rows: Sequence[Mapping[str, object]]) -> str:
     """A Markdown table of the rounds: expert frames, beta, the worlds' mean and worst eta, the tracks."""
     if not rows:
         return ""
@@ -53,7 +55,7 @@ def rounds_table(rows: list[dict[str, Any]]) -> str:
     head += [p.replace("_", " ") for p in perturbations]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
-        cells = [str(row["round"]), row["mode"], f"{row['beta']:.3g}", f"{row['expert_frames']:,}"]
+        cells = [str(row["round"]), str(row["mode"]), f"{row['beta']:.3g}", f"{row['expert_frames']:,}"]
         if "worlds_mean" in row:
             cells += [f"{row['worlds_mean']:.1f} %", f"{row['worlds_worst']:.1f} %",
                       f"{row['worlds_at_target']}/{row['worlds_n']}", str(row["worlds_takeovers"])]
