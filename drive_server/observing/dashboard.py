@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from importlib import resources
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIEnvironment
@@ -73,7 +73,7 @@ class DashboardConfig:
 class Dashboard:
     """Serves the page and pushes snapshots; ``snapshot()`` is the server's view of its clients."""
 
-    def __init__(self, snapshot: Callable[[bool], dict[str, Any]], sleep: Callable[[float], None],
+    def __init__(self, snapshot: Callable[[bool], dict[str, object]], sleep: Callable[[float], None],
                  spawn: Callable[[Callable[[], None]], object], make_queue: Callable[[int], ViewerQueue],
                  config: DashboardConfig = DashboardConfig()) -> None:
         self._snapshot, self._sleep, self._spawn, self._make_queue = snapshot, sleep, spawn, make_queue

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from drive_server.observing.dashboard import RECENT_FRAMES
 from drive_server.observing.stats import STAGES, summarize
@@ -55,7 +55,7 @@ class Served(Protocol):
     def dashboard(self) -> Dashboard | None: ...
 
 
-def server_view(server: Served) -> dict[str, Any]:
+def server_view(server: Served) -> dict[str, object]:
     """The model, its input contract and the control law's parameters."""
     pipeline = server.pipeline
     cfg = pipeline.config
@@ -69,7 +69,7 @@ def server_view(server: Served) -> dict[str, Any]:
     }
 
 
-def _monitor_view(pipeline: DrivePipeline) -> dict[str, Any] | None:
+def _monitor_view(pipeline: DrivePipeline) -> dict[str, object] | None:
     spec = pipeline.monitor_spec
     if spec is None:
         return None
@@ -77,28 +77,28 @@ def _monitor_view(pipeline: DrivePipeline) -> dict[str, Any] | None:
             "mode": pipeline.config.monitor.mode.value}
 
 
-def client_view(client: Watched, cfg: DriveConfig, with_latency: bool, now: float) -> dict[str, Any]:
+def client_view(client: Watched, cfg: DriveConfig, with_latency: bool, now: float) -> dict[str, object]:
     """One simulator's panel: latest frame (the JPEG as it was sent), counters, recent latency."""
     stats, guard = client.stats, client.guard
-    entry: dict[str, Any] = {
-        "sid": client.sid, "agent": client.user_agent, "speed_unit": cfg.speed_unit.value,
-        "counters": {"frames": stats.frames, "malformed": stats.malformed, "manual (null)": stats.manual,
-                     "non-finite outputs": getattr(stats, "bad_output", 0), "held": guard.held,
-                     "stopped": guard.stopped},
-    }
+    counters: dict[str, int] = {"frames": stats.frames, "malformed": stats.malformed, "manual (null)": stats.manual,
+                                "non-finite outputs": getattr(stats, "bad_output", 0), "held": guard.held,
+                                "stopped": guard.stopped}
+    entry: dict[str, object] = {"sid": client.sid, "agent": client.user_agent, "speed_unit": cfg.speed_unit.value,
+                                "counters": counters}
     frame = client.live
     if frame is not None:
-        entry["frame"] = {"image": frame.image_b64, "age_s": round(now - frame.t, 2),
-                          "steering": round(frame.steering, 4),
-                          "steering_deg": round(cfg.law.steering_deg(frame.steering), 2),
-                          "throttle": round(frame.throttle, 4), "speed": round(frame.speed, 2),
-                          "speed_kmh": round(to_kmh(frame.speed, cfg.speed_unit), 2), "fallback": frame.fallback}
+        shown: dict[str, object] = {
+            "image": frame.image_b64, "age_s": round(now - frame.t, 2), "steering": round(frame.steering, 4),
+            "steering_deg": round(cfg.law.steering_deg(frame.steering), 2), "throttle": round(frame.throttle, 4),
+            "speed": round(frame.speed, 2), "speed_kmh": round(to_kmh(frame.speed, cfg.speed_unit), 2),
+            "fallback": frame.fallback}
         if frame.monitor is not None:
-            entry["frame"]["monitor"] = {"score": round(frame.monitor.score, 5), "mean": round(frame.monitor.mean, 5),
-                                         "state": frame.monitor.level.label}
+            shown["monitor"] = {"score": round(frame.monitor.score, 5), "mean": round(frame.monitor.mean, 5),
+                                "state": frame.monitor.level.label}
+        entry["frame"] = shown
     monitor = getattr(client, "monitor", None)
     if monitor is not None:
-        entry["counters"].update({"monitor warnings": monitor.state.episodes["warning"],
+        counters.update({"monitor warnings": monitor.state.episodes["warning"],
                                   "monitor alarms": monitor.state.episodes["alarm"]})
         if monitor.failed:
             entry["monitor_failed"] = monitor.failed
@@ -109,7 +109,7 @@ def client_view(client: Watched, cfg: DriveConfig, with_latency: bool, now: floa
     return entry
 
 
-def snapshot(server: Served, with_latency: bool) -> dict[str, Any]:
+def snapshot(server: Served, with_latency: bool) -> dict[str, object]:
     """One push to every viewer (``with_latency``: percentiles too, a few times a second)."""
     now = time.perf_counter()
     cfg = server.pipeline.config

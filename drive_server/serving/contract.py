@@ -11,7 +11,6 @@ import json
 import logging
 import math
 from dataclasses import asdict, dataclass, replace
-from typing import Any
 
 from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT
@@ -126,7 +125,7 @@ class PreprocessContract:
     @classmethod
     def from_json(cls, text: str) -> PreprocessContract:
         try:
-            data: dict[str, Any] = json.loads(text)
+            data: object = json.loads(text)
         except json.JSONDecodeError as exc:
             raise ContractError(f"{METADATA_KEY} is not valid JSON: {exc}") from None
         if not isinstance(data, dict):

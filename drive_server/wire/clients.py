@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from drive_server.observing.stats import LatencyStats
 from drive_server.serving.guard import FrameGuard
@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from drive_server.serving.client_monitor import ClientMonitor
     from drive_server.serving.smoothing import SteeringSmoother
     from drive_server.wire.connections import TcpSocket
+    from drive_server.wire.patches.eventlet_engineio import EngineSession
 
 #: Disconnected clients whose statistics are kept individually (older ones only add to the counters).
 MAX_FINISHED_CLIENTS = 64
@@ -40,7 +41,7 @@ class ClientState:
     smoother: SteeringSmoother | None = None  # this client's steering smoothing (None: off)
     monitor: ClientMonitor | None = None  # this client's misbehaviour monitor (None: off)
 
-    def not_reading(self, session: Any, max_pending: int) -> bool:  # an engineio.Socket (untyped package: Any)
+    def not_reading(self, session: EngineSession, max_pending: int) -> bool:
         """Replies pile up in engine.io's queue, or (checked every 32 replies: one ioctl) in the kernel."""
         if session.queue.qsize() >= max_pending:
             return True

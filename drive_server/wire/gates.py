@@ -13,7 +13,7 @@ import io
 import logging
 from collections.abc import Callable, Iterable
 from time import monotonic
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qs
 
 from drive_server.wire.limits import (
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIApplication, WSGIEnvironment
 
     from drive_server.wire.connections import ConnectionLimiter
+    from drive_server.wire.patches.eventlet_engineio import EngineServer, EventletWebSocket
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,7 @@ def limited_message_class(base: type, limit: int, on_too_large: Callable[[int], 
     return LimitedMessage
 
 
-def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str, heard: list[float]) -> None:
+def guard_websocket(ws: EventletWebSocket, limits: WireLimits, faults: FaultLog, peer: str, heard: list[float]) -> None:
     """Apply the per-connection limits to one eventlet ``RFC6455WebSocket`` (instance attributes only);
     ``heard[0]`` becomes the time of its latest message (what the connection cap's idle eviction reads)."""
     ws.Message = limited_message_class(
@@ -70,7 +71,7 @@ def guard_websocket(ws: Any, limits: WireLimits, faults: FaultLog, peer: str, he
         # one message per connection per turn of the event loop: a client whose socket always has data
         # (a flood) must not keep the loop from the other clients' readers and writers
         eventlet.sleep(0)
-        data: str | bytes | None = stock_wait()  # eventlet's RFC6455WebSocket.wait (no stubs: Any)
+        data = stock_wait()  # eventlet's RFC6455WebSocket.wait
         if data is None:
             return None
         heard[0] = monotonic()
@@ -92,7 +93,7 @@ def limited_websocket_class(base: type, limiter: ConnectionLimiter) -> type:
     if not ok:
         log.warning("WebSocket messages bounded only after reassembly (%s)", why)
 
-    def on_upgrade(environ: WSGIEnvironment, ws: Any) -> None:
+    def on_upgrade(environ: WSGIEnvironment, ws: EventletWebSocket) -> None:
         peer = f"{environ.get('REMOTE_ADDR', '?')}:{environ.get('REMOTE_PORT', '?')}"
         heard = [monotonic()]  # the upgrade counts as hearing from it
         limiter.upgraded[id(ws)] = (ws.socket, heard)
@@ -125,7 +126,8 @@ def _raw_response(environ: WSGIEnvironment, status: str, body: bytes) -> list[by
     return []
 
 
-def polling_gate(app: WSGIApplication, eio_server: Any, limits: WireLimits, faults: FaultLog) -> WSGIApplication:
+def polling_gate(app: WSGIApplication, eio_server: EngineServer, limits: WireLimits,
+                 faults: FaultLog) -> WSGIApplication:
     """WSGI middleware: refuse an Engine.IO long-polling POST before engine.io reads it.
 
     Oversized (from Content-Length alone) -> 413, chunked -> 411, body not sent within the header

@@ -5,15 +5,37 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
-from drive_server.observing.stats import LatencyStats, summarize
+from drive_server.observing.stats import LatencyStats, StatsSummary, summarize
 from drive_server.serving.guard import FallbackPolicy
 from drive_server.serving.model import SteeringModel
 from drive_server.wire.limits import WireLimits
 from drive_server.wire.transport import TransportTuning
 
 RETIRED = "retired"
+
+
+class ClientSummary(StatsSummary):
+    """One client's entry of ``--stats-json``: its name, then its totals and percentiles."""
+
+    client: str
+
+
+class StatsDocument(TypedDict, total=False):
+    """What ``--stats-json`` holds (every key; a copy in a benchmark's record may leave ``clients`` out)."""
+
+    model: str
+    contract_source: str
+    contract: dict[str, object]
+    threads: int
+    provider: str
+    workers: int
+    transport: dict[str, object]
+    total: StatsSummary
+    faults: dict[str, int]
+    limits: dict[str, object]
+    clients: list[ClientSummary]
 
 
 @dataclass(frozen=True)
@@ -35,7 +57,7 @@ class ServerConfig:
 
 def stats_document(model: SteeringModel, transport: TransportTuning, stats: list[LatencyStats],
                    workers: int = 1, faults: dict[str, int] | None = None,
-                   limits: WireLimits | None = None) -> dict[str, Any]:
+                   limits: WireLimits | None = None) -> StatsDocument:
     """What ``--stats-json`` holds: the model, the settings, totals and one entry per client."""
     return {
         "model": str(model.path),
@@ -48,5 +70,5 @@ def stats_document(model: SteeringModel, transport: TransportTuning, stats: list
         "total": summarize(stats),
         "faults": faults or {},
         "limits": (limits or WireLimits()).__dict__,
-        "clients": [dict(client=s.name, **s.summary()) for s in stats if s.name != RETIRED],
+        "clients": [{"client": s.name, **s.summary()} for s in stats if s.name != RETIRED],
     }

@@ -4,11 +4,11 @@ faults it refused or closed, the line it logs every ``--log-every`` seconds and 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from drive_server.observing.stats import FaultCounters, LatencyStats, save_stats, summarize, summary_line
 from drive_server.wire.clients import ClientHistory
-from drive_server.wire.server_config import ServerConfig, stats_document
+from drive_server.wire.server_config import ServerConfig, StatsDocument, stats_document
 from protocol.runrecords import write_json
 
 if TYPE_CHECKING:
@@ -39,7 +39,7 @@ class ServerStats:
     def all_stats(self) -> list[LatencyStats]:
         return [*self.history.all_stats(), *(c.stats for c in self.clients.values())]
 
-    def document(self) -> dict[str, Any]:
+    def document(self) -> StatsDocument:
         """What ``--stats-json`` holds."""
         return stats_document(self.pipeline.model, self.transport, self.all_stats(), faults=self.faults.as_dict(),
                               limits=self.config.limits)

@@ -23,13 +23,15 @@ import contextlib
 import logging
 import socket
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from drive_server.wire.patches import eventlet_engineio as wire
 from protocol.websocket import xor_mask
 
 if TYPE_CHECKING:
     from wsgiref.types import WSGIEnvironment
+
+    from drive_server.wire.patches.eventlet_engineio import EngineServer, EventletWebSocket
 
 log = logging.getLogger(__name__)
 
@@ -65,14 +67,14 @@ def tuned_websocket_class(base: type, tuning: TransportTuning) -> type:
             with contextlib.suppress(OSError, AttributeError):
                 environ["eventlet.input"].get_socket().setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
-    def on_upgrade(environ: WSGIEnvironment, ws: Any) -> None:  # eventlet's RFC6455WebSocket (no stubs)
+    def on_upgrade(environ: WSGIEnvironment, ws: EventletWebSocket) -> None:
         wire.use_unmask(ws, fast_apply_mask)
 
     return wire.hooked_websocket_class(base, "TunedWebSocketWSGI", on_request=on_request,
                                        on_upgrade=on_upgrade if tuning.fast_unmask else None)
 
 
-def install(eio_server: Any, tuning: TransportTuning = TransportTuning()) -> TransportTuning:
+def install(eio_server: EngineServer, tuning: TransportTuning = TransportTuning()) -> TransportTuning:
     """Give ``eio_server`` (an ``engineio.Server`` in eventlet mode) the tuned WebSocket; returns what
     was actually applied."""
     if eio_server.async_mode != "eventlet":

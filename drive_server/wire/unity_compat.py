@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import Any
 
 import socketio
 
@@ -31,7 +30,7 @@ class UnityCompatibleServer(socketio.Server):  # type: ignore[misc]  # python-so
     on_protocol_error: Callable[[str, str], None]
     manager_initialized: bool  # socketio.Server's own (the package is untyped)
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:  # socketio.Server's arguments
+    def __init__(self, *args: object, **kwargs: object) -> None:  # socketio.Server's arguments
         super().__init__(*args, **kwargs)
         self.stock_message = wire.intercept_engine_messages(self, self.handle_message)
 

@@ -16,7 +16,7 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypedDict
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -29,6 +29,8 @@ from tools.wire.unity_client import UnityWireClient
 if TYPE_CHECKING:
     from multiprocessing.queues import Queue
     from multiprocessing.synchronize import Barrier
+
+    from drive_server.wire.server_config import StatsDocument
 
 log = logging.getLogger("rbc.bench")
 
@@ -54,6 +56,9 @@ class LatencyPlan:
     json_out: Path | None = None  # also write the results as JSON here
 
 
+_NO_STATS: StatsDocument = {}  # an external server's: none
+
+
 @dataclass
 class BenchResult:
     """One benchmark run (one model, M clients)."""
@@ -65,7 +70,7 @@ class BenchResult:
     warmup: int
     round_trip_ms: dict[str, float]
     telemetry_per_s: float
-    server: dict[str, Any] = field(default_factory=dict)
+    server: StatsDocument = field(default_factory=lambda: _NO_STATS.copy())  # the server's --stats-json
     workers: int = 1
 
 
@@ -189,7 +194,7 @@ def bench_one(plan: LatencyPlan, label: str, model: Path | None) -> BenchResult:
             rtts, rate = drive(server.url, plan.log_dir, plan.clients, plan.frames, plan.warmup)
         finally:
             server.stop()
-        stats = json.loads(stats_path.read_text()) if stats_path.is_file() else {}
+        stats: StatsDocument = json.loads(stats_path.read_text()) if stats_path.is_file() else {}
     stats.pop("clients", None)
     return BenchResult(label, str(model), plan.clients, plan.frames, plan.warmup, _percentiles_ms(rtts),
                        round(rate, 1), stats, plan.workers)

@@ -4,22 +4,73 @@ The libraries are imported inside the functions: the command line imports this m
 :mod:`drive_server.wire.transport`) and must not pay for, or print anything from, eventlet before it serves.
 On an upgrade: read each function below against the new library, update ``CHECKED_VERSIONS`` and run
 ``tests/test_wire_patches.py`` and the wire tests it names.
-The three libraries ship no type information: their objects (``ws``, ``sio``, ``eio_server``) are ``Any`` here.
+The three libraries ship no type information: the parts of their objects the server uses are the protocols below
+(:class:`EventletWebSocket`, :class:`EngineServer`, :class:`EngineSession`, :class:`SocketServer`).
 """
 
 from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol, cast
 
 from drive_server.wire.patches import PrivateName
 
 if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIEnvironment
 
+    from drive_server.wire.connections import TcpSocket
+
 #: engine.io's ``message`` handler: (eio_sid, the message: text, or bytes for a binary one).
 MessageHandler = Callable[[str, str | bytes], None]
+
+
+class EventletWebSocket(Protocol):
+    """What the server uses of eventlet's ``RFC6455WebSocket`` (one upgraded connection): the message class its
+    frame parser builds (bounded per connection), its TCP socket, ``wait`` for the next message (replaced per
+    connection), and the two private names patched below."""
+
+    Message: type
+    socket: TcpSocket
+    wait: Callable[[], str | bytes | None]
+    _apply_mask: Callable[..., bytes]
+
+    def _send_closing_frame(self, ignore_send_errors: bool = False,
+                            close_data: tuple[int, str] | None = None) -> None: ...
+
+
+class _Queue(Protocol):
+    def qsize(self) -> int: ...
+
+
+class EngineSession(Protocol):
+    """What the server uses of python-engineio's ``Socket`` (one client's session)."""
+
+    closed: bool
+    closing: bool
+    queue: _Queue  # the packets waiting to be sent to the client
+
+    def close(self, wait: bool = True, abort: bool = False) -> None: ...
+
+
+class EngineServer(Protocol):
+    """What the server uses of python-engineio's ``Server``: its mode, its sessions by id, its message handler's
+    registration, and its async driver's table (private, :func:`wrap_websocket_class`)."""
+
+    async_mode: str
+    sockets: dict[str, EngineSession]
+    _async: dict[str, object]
+
+    def on(self, event: str, handler: MessageHandler) -> object: ...
+
+
+class SocketServer(Protocol):
+    """What the patches use of python-socketio's ``Server``: its engine.io server and two private methods."""
+
+    eio: EngineServer
+    _handle_eio_message: MessageHandler
+
+    def _trigger_event(self, event: str, namespace: str, *args: object) -> object: ...
 
 #: The versions every patch below was read against and tested with (the wire tests, the hostile campaign).
 CHECKED_VERSIONS: dict[str, tuple[str, ...]] = {
@@ -82,7 +133,7 @@ def fast_unmask_supported(version: str | None = None) -> tuple[bool, str]:
     return True, ""
 
 
-def use_unmask(ws: Any, unmask: Callable[..., bytes]) -> None:
+def use_unmask(ws: EventletWebSocket, unmask: Callable[..., bytes]) -> None:
     """Unmask the frames of the WebSocket ``ws`` with ``unmask`` instead of eventlet's ``_apply_mask``.
 
     Why: eventlet unmasks every client frame one byte at a time in Python, several milliseconds for a
@@ -107,7 +158,7 @@ def whole_message_bound_supported() -> tuple[bool, str]:
     return True, ""
 
 
-def send_close_frame(ws: Any, code: int, reason: str) -> None:
+def send_close_frame(ws: EventletWebSocket, code: int, reason: str) -> None:
     """Send the close frame ``code`` with ``reason`` on the eventlet WebSocket ``ws``, send errors ignored.
 
     Why private: eventlet's public ``close()`` sends only 1000 and blocks; the server closes a client after
@@ -119,7 +170,7 @@ def send_close_frame(ws: Any, code: int, reason: str) -> None:
 
 
 def hooked_websocket_class(base: type, name: str, on_request: Callable[[WSGIEnvironment], None] | None = None,
-                           on_upgrade: Callable[[WSGIEnvironment, Any], None] | None = None,
+                           on_upgrade: Callable[[WSGIEnvironment, EventletWebSocket], None] | None = None,
                            on_end: Callable[[WSGIEnvironment], None] | None = None) -> type:
     """A subclass of engine.io's eventlet ``WebSocketWSGI`` ``base`` calling hooks around each connection.
 
@@ -142,8 +193,8 @@ def hooked_websocket_class(base: type, name: str, on_request: Callable[[WSGIEnvi
                 if on_end is not None:
                     on_end(environ)
 
-        def _handle_hybi_request(self, environ: WSGIEnvironment) -> Any:
-            ws = super()._handle_hybi_request(environ)
+        def _handle_hybi_request(self, environ: WSGIEnvironment) -> object:
+            ws: object = super()._handle_hybi_request(environ)
             if on_upgrade is not None and isinstance(ws, RFC6455WebSocket):
                 on_upgrade(environ, ws)
             return ws
@@ -152,7 +203,7 @@ def hooked_websocket_class(base: type, name: str, on_request: Callable[[WSGIEnvi
     return Hooked
 
 
-def wrap_websocket_class(eio_server: Any, wrap: Callable[[type], type]) -> None:
+def wrap_websocket_class(eio_server: EngineServer, wrap: Callable[[type], type]) -> None:
     """Give this ``engineio.Server`` (eventlet mode) the WebSocket class ``wrap(its current class)``.
 
     Why private: engine.io takes its WebSocket class from its async driver's table ``_async``, which each
@@ -161,11 +212,11 @@ def wrap_websocket_class(eio_server: Any, wrap: Callable[[type], type]) -> None:
     Checked: ``CHECKED_VERSIONS["python-engineio"]``.
     """
     table = dict(eio_server._async)
-    table["websocket"] = wrap(table["websocket"])
+    table["websocket"] = wrap(cast(type, table["websocket"]))  # engine.io's WebSocketWSGI class
     eio_server._async = table
 
 
-def intercept_engine_messages(sio: Any, handler: MessageHandler) -> MessageHandler:
+def intercept_engine_messages(sio: SocketServer, handler: MessageHandler) -> MessageHandler:
     """Route every engine.io message of the ``socketio.Server`` ``sio`` to ``handler(eio_sid, data)`` first;
     returns python-socketio's own handler (``Server._handle_eio_message``, bound) for it to call.
 
@@ -179,7 +230,7 @@ def intercept_engine_messages(sio: Any, handler: MessageHandler) -> MessageHandl
     return stock
 
 
-def run_connect_handler(sio: Any, sid: str, environ: WSGIEnvironment) -> object:
+def run_connect_handler(sio: SocketServer, sid: str, environ: WSGIEnvironment) -> object:
     """Run the ``connect`` handler of ``/`` for ``sid`` as python-socketio would on a CONNECT packet.
 
     Why private: a client joined without a CONNECT packet (the simulator) must still get its ``connect``
