@@ -7,7 +7,7 @@ signatures and docstrings of :data:`API`, the few Python entry points a user scr
 ``<!-- generated: readme -->`` (the home page) gets the README, its links made relative to ``docs/``, so
 the front door is written once; ``<!-- generated: models -->`` gets a table of the bundled models read from
 their own ONNX metadata; and every ``<!-- results NAME TABLE -->`` block is rendered afresh from its result
-record (``tools/results.py``), so a results table cannot differ from the figures that were measured.
+record (``tools/results/``), so a results table cannot differ from the figures that were measured.
 """
 
 from __future__ import annotations
