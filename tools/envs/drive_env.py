@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from drive_server.serving.client_monitor import ClientMonitor
     from drive_server.serving.contract import PreprocessContract
     from drive_server.serving.pipeline import DrivePipeline
+    from tools.envs.policy import Observation
 
 FRAME_SHAPE = (FRAME_HEIGHT, FRAME_WIDTH, 3)
 #: the speed observation's upper bound (km/h): the simulated car's top speed
@@ -47,7 +48,7 @@ class EnvNotResetError(UserError, gym.error.ResetNeeded):
     """``step()`` before the first ``reset()``."""
 
 
-def make(render_mode: str | None = None, **kwargs: Any) -> gym.Env[Any, Any]:
+def make(render_mode: str | None = None, **kwargs: object) -> gym.Env[Observation, np.ndarray]:
     """``gymnasium.make``'s entry point: a :class:`DriveEnv`; with ``render_mode="human"`` inside Gymnasium's
     ``HumanRendering`` window, which needs pygame: without it the make fails here, in one line."""
     if render_mode != "human":
@@ -66,7 +67,7 @@ class DriveEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init__(self, render_mode: str | None = None, **kwargs: object) -> None:
         if render_mode not in (None, "rgb_array"):
             raise BadValue(f"render_mode must be None or 'rgb_array', got {render_mode!r}",
                            "gymnasium.make('rbc/Drive-v0', render_mode='human') shows the frames in a window")
@@ -208,13 +209,13 @@ class DriveEnv(gym.Env):
             last["terminal_expert_action"] = last["expert_action"]
             last["expert_action"] = info["expert_action"].copy()
 
-    def _observation_space(self) -> spaces.Space[Any]:
+    def _observation_space(self) -> spaces.Box | spaces.Dict[np.ndarray]:
         config = self.config
         shape = FRAME_SHAPE if config.observation == "frame" else (self.contract.height, self.contract.width, 3)
         image = spaces.Box(0, 255, shape, np.uint8)
         if config.cameras == 1 and not config.speed:
             return image
-        parts: dict[str, spaces.Space[Any]] = {c: image for c in self.camera_names}
+        parts: dict[str, spaces.Space[np.ndarray]] = {c: image for c in self.camera_names}
         if config.speed:
             parts["speed"] = spaces.Box(0.0, MAX_SPEED_KMH, (1,), np.float32)
         return spaces.Dict(parts)

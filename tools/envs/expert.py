@@ -8,7 +8,7 @@ torch; :meth:`ExpertPolicy.sb3` gives the same policy as an SB3 ``BasePolicy`` w
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import TYPE_CHECKING, Protocol, cast
 
 import gymnasium as gym
 import numpy as np
@@ -20,15 +20,17 @@ from tools.envs.drive_env import DriveEnv
 if TYPE_CHECKING:
     from stable_baselines3.common.policies import BasePolicy
 
+    from tools.envs.policy import Observation
+
 
 class _SB3VecEnv(Protocol):
     """What an SB3 ``VecEnv`` offers that the expert uses (duck-typed: SB3 is the optional ``rl`` extra)."""
 
     num_envs: int
-    observation_space: spaces.Space[Any]
-    action_space: spaces.Space[Any]
+    observation_space: spaces.Space[Observation]
+    action_space: spaces.Space[np.ndarray]
 
-    def env_method(self, method_name: str, *args: Any, **kwargs: Any) -> list[Any]: ...
+    def env_method(self, method_name: str, *args: object, **kwargs: object) -> list[np.ndarray]: ...
 
 
 class ExpertPolicy:
@@ -39,14 +41,15 @@ class ExpertPolicy:
     ``expert(obs, states, episode_starts)``, is ``imitation``'s policy callable.
     """
 
-    def __init__(self, env: gym.Env[Any, Any] | gym.vector.VectorEnv[Any, Any, Any] | _SB3VecEnv) -> None:
+    def __init__(self, env: gym.Env[Observation, np.ndarray] | gym.vector.VectorEnv[Observation, np.ndarray, np.ndarray]
+                 | _SB3VecEnv) -> None:
         self.env = env
         if isinstance(env, gym.vector.VectorEnv):
             if not hasattr(env, "call"):  # SyncVectorEnv and AsyncVectorEnv have it; the base class does not
                 raise BadValue(f"ExpertPolicy needs a vector env with call(), got {type(env).__name__}")
             self.num_envs = env.num_envs
-            self.observation_space: spaces.Space[Any] = env.single_observation_space
-            self.action_space: spaces.Space[Any] = env.single_action_space
+            self.observation_space: spaces.Space[Observation] = env.single_observation_space
+            self.action_space: spaces.Space[np.ndarray] = env.single_action_space
             self.vectorised = True
         elif isinstance(env, gym.Env):
             if not isinstance(env.unwrapped, DriveEnv):

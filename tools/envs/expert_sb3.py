@@ -7,19 +7,22 @@ deterministic expert (its DAgger), so there the expert must be one.
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 
+if TYPE_CHECKING:
+    from tools.envs.policy import Observation
+
 
 class ExpertPolicy(Protocol):
     """What this module uses of :class:`tools.envs.expert.ExpertPolicy` (which imports it: no import back)."""
 
-    observation_space: spaces.Space[Any]
-    action_space: spaces.Space[Any]
+    observation_space: spaces.Space[Observation]
+    action_space: spaces.Space[np.ndarray]
 
     def labels(self) -> np.ndarray: ...
 

@@ -17,7 +17,12 @@ import json
 import logging
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from tools.envs.policy import Observation
 
 log = logging.getLogger(__name__)
 
@@ -25,7 +30,7 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class PPORecipe:
     track: str = "lake"
-    worlds: dict[str, Any] | None = None  # a WorldDistribution's fields: generated worlds instead of the track
+    worlds: dict[str, object] | None = None  # a WorldDistribution's fields: generated worlds instead of the track
     timesteps: int = 200_000
     envs: int = 2  # environments stepped in parallel (one process each when more than one)
     max_episode_steps: int = 1000  # 67 simulated seconds
@@ -37,11 +42,11 @@ class PPORecipe:
     log_std_init: float = -1.0
     features: int = 64
     seed: int = 0
-    env_kwargs: dict[str, Any] = field(default_factory=dict)  # any other rbc/Drive-v0 keyword
+    env_kwargs: dict[str, object] = field(default_factory=dict)  # any other rbc/Drive-v0 keyword
 
-    def make_kwargs(self) -> dict[str, Any]:
+    def make_kwargs(self) -> dict[str, Any]:  # gymnasium.make's keywords, each of its own type
         """The keywords of each ``gymnasium.make("rbc/Drive-v0", ...)``."""
-        world: dict[str, Any] = {"worlds": self.worlds} if self.worlds is not None else {"track": self.track}
+        world: dict[str, object] = {"worlds": self.worlds} if self.worlds is not None else {"track": self.track}
         return {**world, "observation": "model", "speed": True, "spawn": "random",
                 "max_episode_steps": self.max_episode_steps, **self.env_kwargs}
 
@@ -87,7 +92,7 @@ def train_ppo(recipe: PPORecipe, out: str | Path, progress: bool = False) -> Pat
     (out / "recipe.json").write_text(json.dumps(asdict(recipe), indent=2) + "\n", encoding="utf-8")
     kwargs = recipe.make_kwargs()
 
-    def make() -> gym.Env[Any, Any]:
+    def make() -> gym.Env[Observation, np.ndarray]:
         return gym.make("rbc/Drive-v0", **kwargs)
 
     envs = SubprocVecEnv([make] * recipe.envs, start_method="fork") if recipe.envs > 1 else DummyVecEnv([make])
