@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from drive_server.observing.dashboard import LiveFrame
     from drive_server.serving.client_monitor import ClientMonitor
     from drive_server.serving.smoothing import SteeringSmoother
-    from drive_server.wire.connections import TcpSocket
+    from drive_server.wire.patches import TcpSocket
     from drive_server.wire.patches.eventlet_engineio import EngineSession
 
 #: Disconnected clients whose statistics are kept individually (older ones only add to the counters).

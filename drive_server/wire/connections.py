@@ -15,9 +15,9 @@ import struct
 import sys
 from collections import OrderedDict
 from time import monotonic
-from typing import Protocol
 
 from drive_server.wire.limits import FaultLog, WireLimits
+from drive_server.wire.patches import TcpSocket
 
 if sys.platform.startswith("linux"):
     import fcntl
@@ -26,16 +26,6 @@ if sys.platform.startswith("linux"):
     _TIOCOUTQ: int | None = termios.TIOCOUTQ
 else:  # pragma: no cover
     _TIOCOUTQ = None
-
-
-class TcpSocket(Protocol):
-    """What is done here to a client's TCP socket (eventlet's ``GreenSocket`` or a plain ``socket.socket``)."""
-
-    def fileno(self) -> int: ...
-
-    def setsockopt(self, level: int, option: int, value: bytes, /) -> None: ...
-
-    def shutdown(self, how: int, /) -> None: ...
 
 
 class ConnectionLimiter:

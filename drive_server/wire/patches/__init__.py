@@ -22,6 +22,7 @@ import warnings
 from dataclasses import dataclass
 from importlib import metadata
 from types import ModuleType
+from typing import Protocol
 
 from protocol.errors import UserError
 
@@ -32,6 +33,17 @@ BACKENDS = {"eventlet": "drive_server.wire.patches.eventlet_engineio"}
 
 #: eventlet's import-time notice; it tells a user of the server nothing (the design card keeps eventlet).
 EVENTLET_DEPRECATION = r"\s*Eventlet is deprecated"
+
+
+class TcpSocket(Protocol):
+    """What the server does to a client's TCP socket (eventlet's ``GreenSocket`` or a plain ``socket.socket``); here,
+    beside the backends' protocols of library objects that hold one, so that they need nothing of the wire above."""
+
+    def fileno(self) -> int: ...
+
+    def setsockopt(self, level: int, option: int, value: bytes, /) -> None: ...
+
+    def shutdown(self, how: int, /) -> None: ...
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from drive_server.wire.patches import PrivateName
 if TYPE_CHECKING:
     from wsgiref.types import StartResponse, WSGIEnvironment
 
-    from drive_server.wire.connections import TcpSocket
+    from drive_server.wire.patches import TcpSocket
 
 #: engine.io's ``message`` handler: (eio_sid, the message: text, or bytes for a binary one).
 MessageHandler = Callable[[str, str | bytes], None]
