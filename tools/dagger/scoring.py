@@ -22,7 +22,7 @@ from tools.dagger.config import PERTURBATIONS, DaggerConfig
 from tools.dagger.records import RangeScore, RoundScores, TrackScore
 from tools.evaluate.experiments import is_autonomous, run_eta
 from tools.evaluate.journal import run_code
-from tools.evaluate.runner import DriverSpec, Runner, read_journal
+from tools.evaluate.runner import DriverSpec, EvalRun, Runner, read_journal
 from tools.evaluate.suite import SuiteConfig, run_suite
 from tools.sim.driving.rules import TARGET_ETA
 
@@ -54,7 +54,7 @@ def _interventions(record: Mapping[str, Any]) -> int:
 
 
 def evaluate_model(model: Path, folder: Path, config: DaggerConfig, worlds: list[tuple[int, str]], workers: int = 1,
-                   on_result: Callable[[dict[str, Any]], None] | None = None) -> RoundScores:
+                   on_result: Callable[[EvalRun], None] | None = None) -> RoundScores:
     """Score ``model`` on ``worlds`` (seed, track file), ``config.tracks`` and (``config.perturbations``) Table 9's
     orientation and light rows; the runs are journaled in ``folder/runs.jsonl`` and reused from there."""
     from tools.sim.driving.model_rig import model_rig

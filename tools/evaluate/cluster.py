@@ -14,12 +14,16 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import Future
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 from protocol.errors import UserError
 from tools.errors import CommandError
-from tools.evaluate.runner import DriverSpec, Runner, Task, pass_on, run_task
+from tools.evaluate.runner import DriverSpec, EvalRun, Runner, Task, pass_on, run_task
 from tools.ray_support import BACKENDS, INSTALL_HINT, import_ray, init_ray
+
+if TYPE_CHECKING:
+    from ray import ObjectRef
 
 log = logging.getLogger(__name__)
 __all__ = ["BACKENDS", "INSTALL_HINT", "RETRIES", "RayRunner", "RunLostError", "import_ray", "make_runner"]
@@ -43,18 +47,18 @@ class RayRunner(Runner):
     """
 
     def __init__(self, spec: DriverSpec, workers: int, journal: Path,
-                 on_result: Callable[[dict[str, Any]], None] | None = None,
-                 reuse: dict[str, dict[str, Any]] | None = None, *, address: str | None = None,
-                 retries: int = RETRIES, task_fn: Callable[[DriverSpec, Task], dict[str, Any]] = run_task) -> None:
+                 on_result: Callable[[EvalRun], None] | None = None,
+                 reuse: dict[str, EvalRun] | None = None, *, address: str | None = None,
+                 retries: int = RETRIES, task_fn: Callable[[DriverSpec, Task], EvalRun] = run_task) -> None:
         self.address = address
         self.max_retries = retries
         self._task_fn = task_fn
-        self._pending: dict[Any, Future] = {}  # Ray object ref -> the run's future (to cancel on Ctrl-C)
+        self._pending: dict[ObjectRef[EvalRun], Future[EvalRun]] = {}  # the run's future (to cancel on Ctrl-C)
         self._closing = threading.Event()
         self._owns_ray = False
         super().__init__(spec, workers, journal, on_result, reuse)
 
-    def _start(self, workers: int) -> Any:
+    def _start(self, workers: int) -> ModuleType:  # the engine: Ray itself
         ray = import_ray()
         self._owns_ray = init_ray(ray, workers, self.address)
         self._remote = ray.remote(num_cpus=1, max_retries=0)(self._task_fn)
@@ -62,13 +66,13 @@ class RayRunner(Runner):
         log.info("Ray backend: %d CPUs (%s)", self.workers, self.address or "local instance")
         return ray
 
-    def _launch(self, task: Task) -> Future:
-        outer: Future = Future()
+    def _launch(self, task: Task) -> Future[EvalRun]:
+        outer: Future[EvalRun] = Future()
         outer.set_running_or_notify_cancel()
         self._attempt(task, outer, 1)
         return outer
 
-    def _attempt(self, task: Task, outer: Future, attempt: int) -> None:
+    def _attempt(self, task: Task, outer: Future[EvalRun], attempt: int) -> None:
         # Checked and registered under the lock that close() takes to cancel: a range search that submits
         # its next step while Ctrl-C closes the runner gets a cancelled run, never a task on a Ray that is
         # shut down (its future would never resolve, and the search thread would hold the exit forever).
@@ -77,16 +81,17 @@ class RayRunner(Runner):
                 outer.set_exception(RunLostError(f"run {task.experiment} value={task.value} seed={task.seed} "
                                                  "cancelled"))
                 return
-            ref = self._remote.remote(self.spec, task)
+            ref: ObjectRef[EvalRun] = self._remote.remote(self.spec, task)
             self._pending[ref] = outer
         ref.future().add_done_callback(lambda f: self._settle(task, outer, attempt, ref, f))
 
-    def _record(self, inner: Future, outer: Future) -> None:
+    def _record(self, inner: Future[EvalRun], outer: Future[EvalRun]) -> None:
         """Pass the run on: :meth:`_settle` journals a run before its future resolves, so none is missed at close."""
         if pass_on(inner, outer):
             outer.set_result(inner.result())
 
-    def _settle(self, task: Task, outer: Future, attempt: int, ref: Any, done: Future) -> None:
+    def _settle(self, task: Task, outer: Future[EvalRun], attempt: int, ref: ObjectRef[EvalRun],
+                done: Future[EvalRun]) -> None:
         with self._lock:
             if self._pending.pop(ref, None) is None:  # already failed by close(cancel=True)
                 return
@@ -129,8 +134,8 @@ class RayRunner(Runner):
 
 
 def make_runner(backend: str, spec: DriverSpec, workers: int, journal: Path,
-                on_result: Callable[[dict[str, Any]], None] | None = None,
-                reuse: dict[str, dict[str, Any]] | None = None, address: str | None = None) -> Runner:
+                on_result: Callable[[EvalRun], None] | None = None,
+                reuse: dict[str, EvalRun] | None = None, address: str | None = None) -> Runner:
     """The runner of ``--backend``: the local process pool, or Ray tasks."""
     if backend == "ray":
         return RayRunner(spec, workers, journal, on_result, reuse, address=address)

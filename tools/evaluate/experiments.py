@@ -6,6 +6,7 @@ Changing what "~100 %" means, a step size or a cap is an edit of this table, not
 from __future__ import annotations
 
 import statistics
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -15,7 +16,7 @@ from protocol.facts import BEHAVIORS
 AUTONOMY_RULE = "no take-over in any lap of the run (degree of autonomy 100 %)"
 
 
-def is_autonomous(run: dict[str, Any]) -> bool:
+def is_autonomous(run: Mapping[str, Any]) -> bool:  # a run's record (EvalRun), journaled by any version
     """The single definition of "~100 %": no take-over in any lap, and every lap completed."""
     laps = run["laps"]
     return bool(laps) and all(lap["completed"] and not lap["interventions"] for lap in laps)
@@ -111,7 +112,7 @@ PAPER_EXPERIMENTS: tuple[str, ...] = tuple(e.key for e in EXPERIMENTS if e.paper
 DEFAULT_UNSEEN_WORLDS = 10
 
 
-def run_eta(record: dict[str, Any]) -> float:
+def run_eta(record: Mapping[str, Any]) -> float:
     """The eta of one run: the mean over its laps (0 for a run without a lap)."""
     laps = record["laps"]
     return statistics.fmean(lap["eta"] for lap in laps) if laps else 0.0

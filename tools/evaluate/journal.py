@@ -14,7 +14,7 @@ from pathlib import Path
 from protocol.codeversion import ROOT, code_digest
 from protocol.runrecords import read_json, write_json, write_text
 from tools.errors import CommandError
-from tools.evaluate.runner import DriverSpec, read_journal, spec_dict
+from tools.evaluate.runner import DriverSpec, EvalRun, read_journal, spec_dict
 
 log = logging.getLogger(__name__)
 
@@ -34,7 +34,7 @@ def driver_identity(spec: DriverSpec) -> dict:
     return fields | {"mode": "socket" if spec.server else "in-process"}
 
 
-def prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> dict[str, dict]:
+def prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> dict[str, EvalRun]:
     """Start a fresh journal, or (``--resume``) load the runs of an earlier one for the same model.
 
     ``journal.json`` beside the journal says which model and driver wrote it, so a resume never mixes
@@ -43,7 +43,7 @@ def prepare_journal(out: Path, journal: Path, identity: dict, resume: bool) -> d
     """
     identity = identity | {"code": run_code()}
     identity_file = out / "journal.json"
-    reuse: dict[str, dict] = {}
+    reuse: dict[str, EvalRun] = {}
     if resume and journal.is_file():
         if identity_file.is_file():
             earlier = read_json(identity_file)

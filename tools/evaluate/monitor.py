@@ -10,7 +10,7 @@ table's columns.
 from __future__ import annotations
 
 import statistics
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,6 +21,7 @@ from tools.monitoreval.summary import run_trace
 if TYPE_CHECKING:
     from drive_server.serving.client_monitor import MonitorPolicy
     from drive_server.serving.monitor import MonitorSpec
+    from tools.evaluate.runner import EvalRun
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.scenario import RunResult
 
@@ -74,7 +75,7 @@ def summarize_monitor(records: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
             "failed": sum(1 for m in runs if m.get("failed"))}
 
 
-def add_monitor_rows(summary: dict[str, Any], records: list[dict[str, Any]]) -> None:
+def add_monitor_rows(summary: dict[str, Any], records: Sequence[EvalRun]) -> None:
     """Give every experiment row of ``summary`` its runs' monitor figures (``summary[key]["monitor"]``)."""
     for key, entry in summary.items():
         entry["monitor"] = summarize_monitor(r for r in records if r["experiment"] == key)

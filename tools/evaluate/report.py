@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, Experiment
 from tools.evaluate.paper import PAPER_TABLE9
+
+if TYPE_CHECKING:
+    from tools.evaluate.runner import EvalRun
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +96,7 @@ def table9(summaries: dict[str, dict[str, Any]], with_paper: bool = True) -> str
     return "\n".join(lines) + "\n"
 
 
-def plot_points(exp: Experiment, entry: dict[str, Any], records: list[dict[str, Any]]
+def plot_points(exp: Experiment, entry: dict[str, Any], records: Sequence[Mapping[str, Any]]
                 ) -> list[tuple[float, float, bool]]:
     """(value, eta, autonomous) of every run of a searched experiment, in order of value.
 
@@ -105,13 +108,13 @@ def plot_points(exp: Experiment, entry: dict[str, Any], records: list[dict[str, 
     origin = entry["origin"] if exp.measure == "range" else 0
     base = [r for r in records if r["experiment"] == "no_variation"]
     if exp.measure == "range" and base:
-        runs.append(min(base, key=lambda r: r["seed"]) | {"value": origin})
+        runs.append({**min(base, key=lambda r: r["seed"]), "value": origin})
     runs.sort(key=lambda r: r["value"])
     return [(r["value"] - origin, sum(lap["eta"] for lap in r["laps"]) / max(1, len(r["laps"])), r["autonomous"])
             for r in runs]
 
 
-def plot_experiments(summary: dict[str, Any], records: list[dict[str, Any]], out_dir: Path) -> list[Path]:
+def plot_experiments(summary: dict[str, Any], records: Sequence[EvalRun], out_dir: Path) -> list[Path]:
     """eta against each varied parameter (pass/fail marked). Needs matplotlib (the plots extra)."""
     try:
         import matplotlib

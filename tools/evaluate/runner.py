@@ -12,14 +12,15 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Required, TypedDict
 
 from drive_server.serving.control import ControlLaw
 from protocol.appending import append_record
+from tools.sim.driving.scenario import RunResultRecord
 
 if TYPE_CHECKING:
     from tools.evaluate.experiments import AxisValue
@@ -43,6 +44,31 @@ class DriverSpec:
             raise ValueError("give a model (in-process) or a server URL")
 
 
+class EvalRun(RunResultRecord, total=False):
+    """One run of an evaluation as the journal and ``results.json`` hold it: the task, then the run's record
+    (:class:`~tools.sim.driving.scenario.RunResultRecord`), then whether it was autonomous, the monitor's figures
+    (``--monitor``) and the trajectory map of a run that was not autonomous."""
+
+    experiment: Required[str]
+    behavior: Required[str]
+    value: Required[AxisValue]
+    seed: Required[int]
+    scenario: Required[dict[str, object]]  # the ScenarioConfig keyword arguments (the task's key)
+    autonomous: bool
+    monitor: dict[str, object]
+    map: str
+
+
+class Retry(TypedDict):
+    """A run a backend retried after a failure (``meta.retried`` of ``results.json``)."""
+
+    experiment: str
+    value: AxisValue
+    seed: int
+    attempt: int
+    error: str
+
+
 @dataclass(frozen=True)
 class Task:
     """One run: which experiment it belongs to, the varied value, the seed and the scenario."""
@@ -55,7 +81,7 @@ class Task:
     map_dir: str | None = None  # write a trajectory map here if the run is not autonomous
     # a generated world's track document: written to scenario["track"] by a worker that lacks the file
     # (a Ray node of another machine), so the run and its record are the driver's
-    track_doc: dict[str, Any] | None = field(default=None, compare=False, repr=False)
+    track_doc: Mapping[str, object] | None = field(default=None, compare=False, repr=False)
 
 
 _DRIVERS: dict[tuple[DriverSpec, float | None], OnnxDriver | SocketDriver] = {}
@@ -80,7 +106,7 @@ def _driver(spec: DriverSpec, speed_limit_kmh: float):
     return _DRIVERS[key]
 
 
-def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
+def run_task(spec: DriverSpec, task: Task) -> EvalRun:
     """Execute one task (in a worker process) and return a JSON-ready record."""
     import cv2
 
@@ -97,7 +123,7 @@ def run_task(spec: DriverSpec, task: Task) -> dict[str, Any]:
     started = time.perf_counter()
     driver = _driver(spec, config.speed_limit_kmh)
     result = run_scenario(config, driver)
-    record = {"experiment": task.experiment, "behavior": task.behavior, "value": task.value, "seed": task.seed,
+    record: EvalRun = {"experiment": task.experiment, "behavior": task.behavior, "value": task.value, "seed": task.seed,
               "wall_time_s": round(time.perf_counter() - started, 3), **result.to_dict(), "scenario": task.scenario}
     record["autonomous"] = is_autonomous(record)
     if isinstance(driver, OnnxDriver) and driver.monitor is not None:  # --monitor warn|act, a model carrying one
@@ -123,18 +149,18 @@ def task_key(experiment: str, value: AxisValue, seed: int, scenario: dict[str, A
     return json.dumps([experiment, value, seed, scenario], sort_keys=True)
 
 
-def record_key(record: dict[str, Any]) -> str | None:
+def record_key(record: Mapping[str, Any]) -> str | None:
     if "scenario" not in record:
         return None
     return task_key(record["experiment"], record["value"], record["seed"], record["scenario"])
 
 
-def read_journal(path: Path) -> dict[str, dict[str, Any]]:
+def read_journal(path: Path) -> dict[str, EvalRun]:
     """Finished runs of an earlier (interrupted) evaluation, by task key.
 
     A line cut short by the interruption is skipped with a warning, never fatal.
     """
-    found: dict[str, dict[str, Any]] = {}
+    found: dict[str, EvalRun] = {}
     if not path.is_file():
         return found
     for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
@@ -166,15 +192,15 @@ class Runner:
     """
 
     def __init__(self, spec: DriverSpec, workers: int, journal: Path,
-                 on_result: Callable[[dict[str, Any]], None] | None = None,
-                 reuse: dict[str, dict[str, Any]] | None = None) -> None:
+                 on_result: Callable[[EvalRun], None] | None = None,
+                 reuse: dict[str, EvalRun] | None = None) -> None:
         self.spec = spec
         self.journal = journal
         self.on_result = on_result
-        self.records: list[dict[str, Any]] = []
+        self.records: list[EvalRun] = []
         self.reused = 0
         self.workers = max(1, workers)  # runs at once (a cluster backend sets its own)
-        self.retried: list[dict[str, Any]] = []  # runs a backend retried after a failure, for the record
+        self.retried: list[Retry] = []  # runs a backend retried after a failure, for the record
         self._reuse = dict(reuse or {})
         self._lock = threading.Lock()
         self.failure: OSError | None = None  # the first journal write that failed: the evaluation stops
@@ -184,14 +210,14 @@ class Runner:
         """The execution engine (here a local process pool); a backend subclass starts its own."""
         return ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_worker)
 
-    def _launch(self, task: Task) -> Future:
+    def _launch(self, task: Task) -> Future[EvalRun]:
         """Start one run on the engine; the future's result is the run record."""
         return self._pool.submit(run_task, self.spec, task)
 
-    def submit(self, task: Task) -> Future:
+    def submit(self, task: Task) -> Future[EvalRun]:
         done = self._reuse.pop(task_key(task.experiment, task.value, task.seed, task.scenario), None)
         if done is not None:
-            future: Future = Future()
+            future: Future[EvalRun] = Future()
             future.set_result(done)
             with self._lock:
                 self.reused += 1
@@ -202,15 +228,15 @@ class Runner:
         if self.failure is not None:  # the journal cannot be written (a full disk): start nothing new
             raise self.failure
         future = self._launch(task)
-        outer: Future = Future()  # resolves once the run is journaled; a journal error is its exception
+        outer: Future[EvalRun] = Future()  # resolves once the run is journaled; a journal error is its exception
         future.add_done_callback(lambda inner: self._record(inner, outer))
         return outer
 
-    def run(self, tasks: Iterable[Task]) -> list[dict[str, Any]]:
+    def run(self, tasks: Iterable[Task]) -> list[EvalRun]:
         futures = [self.submit(t) for t in tasks]
         return [f.result() for f in futures]
 
-    def _record(self, inner: Future, outer: Future) -> None:
+    def _record(self, inner: Future[EvalRun], outer: Future[EvalRun]) -> None:
         if not pass_on(inner, outer):
             return
         try:
@@ -221,7 +247,7 @@ class Runner:
             return
         outer.set_result(inner.result())
 
-    def _keep(self, record: dict[str, Any]) -> None:
+    def _keep(self, record: EvalRun) -> None:
         """Journal a finished run and tell ``on_result``."""
         if record.get("interrupted"):
             # Ctrl-C reaches the workers too, and the simulator returns the run so far: eta 0 for a run
@@ -237,7 +263,7 @@ class Runner:
         self._pool.shutdown(wait=not cancel, cancel_futures=cancel)
 
 
-def pass_on(inner: Future, outer: Future) -> bool:
+def pass_on(inner: Future[EvalRun], outer: Future[EvalRun]) -> bool:
     """Give ``outer`` the cancellation or the exception of the finished ``inner``; True if it has a result."""
     if inner.cancelled():
         outer.cancel()
@@ -248,5 +274,5 @@ def pass_on(inner: Future, outer: Future) -> bool:
     return True
 
 
-def spec_dict(spec: DriverSpec) -> dict[str, Any]:
+def spec_dict(spec: DriverSpec) -> dict[str, object]:
     return asdict(spec)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import statistics
 import threading
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -24,7 +25,7 @@ from tools.evaluate.experiments import (
     is_autonomous,
     run_eta,
 )
-from tools.evaluate.runner import Runner, Task
+from tools.evaluate.runner import EvalRun, Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
 from tools.sim.render.camera import DEFAULT_RIG
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS
@@ -85,7 +86,7 @@ def _world_task(exp: Experiment, seed: int, path: str, cfg: SuiteConfig) -> Task
     return Task(exp.key, cfg.behavior, seed, cfg.base_seed, scenario, cfg.map_dir, track_doc=track_doc(path))
 
 
-def summarize_eta(records: list[dict[str, Any]]) -> dict[str, Any]:
+def summarize_eta(records: Sequence[EvalRun]) -> dict[str, Any]:
     etas = [run_eta(r) for r in records]
     return {"mean": statistics.fmean(etas), "std": statistics.pstdev(etas) if len(etas) > 1 else 0.0,
             "n": len(etas), "etas": etas, "autonomous": sum(is_autonomous(r) for r in records)}

@@ -9,6 +9,7 @@ per-world eta, the worst world, and how many needed no intervention.
 from __future__ import annotations
 
 import statistics
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from types import ModuleType
@@ -60,7 +61,7 @@ def track_doc(path: str) -> dict[str, Any]:
     return read_json(Path(path))
 
 
-def summarize_worlds(records: list[dict[str, Any]]) -> dict[str, Any]:
+def summarize_worlds(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Mean ± std of eta over worlds (one run each), the worst world, and each world's run."""
     per = sorted(({"seed": r["value"], "eta": run_eta(r), "autonomous": is_autonomous(r),
                    "interventions": sum(lap.get("n_interventions", len(lap.get("interventions") or []))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
+from typing import TypedDict
 
 import numpy as np
 
@@ -72,6 +73,35 @@ def angle_diff(a: float, b: float) -> float:
     return math.remainder(a - b, math.tau)
 
 
+class InterventionRecord(TypedDict):
+    """A take-over as a run's record holds it."""
+
+    cause: str
+    s: float
+    x: float
+    y: float
+    t: float
+
+
+class LapRecord(TypedDict):
+    """A lap as a run's record holds it (:meth:`LapResult.to_dict`)."""
+
+    lap: int
+    completed: bool
+    lap_time_s: float
+    distance_m: float
+    eta: float
+    eta_clamped: bool
+    n_interventions: int
+    causes: dict[str, int]
+    interventions: list[InterventionRecord]
+    mean_speed_kmh: float
+    cte_rms_m: float
+    cte_max_m: float
+    collisions: int
+    lane_departures: int
+
+
 @dataclass(frozen=True)
 class Intervention:
     cause: Cause
@@ -80,7 +110,7 @@ class Intervention:
     y: float
     t: float  # simulated seconds since the start of the run
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> InterventionRecord:
         return {"cause": str(self.cause), "s": round(self.s, 2), "x": round(self.x, 2), "y": round(self.y, 2),
                 "t": round(self.t, 3)}
 
@@ -238,7 +268,7 @@ class LapResult:
             out[str(i.cause)] = out.get(str(i.cause), 0) + 1
         return out
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> LapRecord:
         return {
             "lap": self.lap, "completed": self.completed, "lap_time_s": round(self.lap_time_s, 3),
             "distance_m": round(self.distance_m, 2), "eta": round(self.eta, 3),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import statistics
 from dataclasses import asdict, dataclass, field
+from typing import TypedDict
 
 import numpy as np
 
@@ -12,6 +13,7 @@ from protocol.errors import BadValue
 from protocol.facts import DEPLOY_SPEED_KMH
 from tools.sim.driving.rules import (
     Intervention,
+    LapRecord,
     LapResult,
     Rules,
 )
@@ -92,6 +94,24 @@ class Trace:
     lap: np.ndarray
 
 
+class RunResultRecord(TypedDict):
+    """A run as its record holds it (:meth:`RunResult.to_dict`; ``rbc sim --json``, each run of ``rbc eval``)."""
+
+    config: dict[str, object]  # the ScenarioConfig's fields
+    rules: dict[str, object]  # the Rules' fields
+    driver: str
+    laps: list[LapRecord]
+    completed: bool
+    mean_eta: float
+    wall_time_s: float
+    sim_time_s: float
+    frames: int
+    latency_ms_p50: float
+    latency_ms_p99: float
+    track_length_m: float
+    interrupted: bool
+
+
 @dataclass
 class RunResult:
     config: ScenarioConfig
@@ -116,7 +136,7 @@ class RunResult:
     def mean_eta(self) -> float:
         return statistics.fmean(lap.eta for lap in self.laps) if self.laps else 0.0
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> RunResultRecord:
         return {
             "config": self.config.to_dict(), "rules": self.rules.to_dict(), "driver": self.driver,
             "laps": [lap.to_dict() for lap in self.laps], "completed": self.completed,
