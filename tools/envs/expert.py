@@ -33,6 +33,11 @@ class _SB3VecEnv(Protocol):
     def env_method(self, method_name: str, *args: object, **kwargs: object) -> list[np.ndarray]: ...
 
 
+#: What an expert can be bound to: one env, a Gymnasium vector env, or an SB3 VecEnv of them.
+DriveEnvs = (gym.Env["Observation", np.ndarray] | gym.vector.VectorEnv["Observation", np.ndarray, np.ndarray]
+             | _SB3VecEnv)
+
+
 class ExpertPolicy:
     """The autopilot's action for each bound environment's current state, with SB3's ``predict`` signature.
 
@@ -41,8 +46,7 @@ class ExpertPolicy:
     ``expert(obs, states, episode_starts)``, is ``imitation``'s policy callable.
     """
 
-    def __init__(self, env: gym.Env[Observation, np.ndarray] | gym.vector.VectorEnv[Observation, np.ndarray, np.ndarray]
-                 | _SB3VecEnv) -> None:
+    def __init__(self, env: DriveEnvs) -> None:
         self.env = env
         if isinstance(env, gym.vector.VectorEnv):
             if not hasattr(env, "call"):  # SyncVectorEnv and AsyncVectorEnv have it; the base class does not
