@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import logging
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import onnx
@@ -41,7 +41,7 @@ class ExportError(UserError, RuntimeError):
     hint = "pass an .onnx model exported by rbc train, or a bundled one from models/pretrained/"
 
 
-def export_onnx(net: nn.Module, contract: PreprocessContract, info: dict[str, Any], path: Path,
+def export_onnx(net: nn.Module, contract: PreprocessContract, info: Mapping[str, object], path: Path,
                 frames: np.ndarray, smoothing: float = OFF, gain: float = NO_GAIN) -> float:
     """Write ``path`` (atomically) and return the max |ORT - torch| on ``frames`` (uint8 network images).
 

@@ -44,7 +44,7 @@ def move_gain_to_serving(src: Path, dst: Path, seed: int = 0) -> float:
     inputs (``seed``); ``GainError`` if the file has no such multiplication."""
     model = read_steering_graph(src, GainError)
     proto, info = model.proto, dict(model.info)
-    scale = float(info.get("output_scale", 1.0))
+    scale = float(model.info.get("output_scale", 1.0))
     last = proto.graph.node[-1]
     if scale == 1.0 or last.op_type != "Mul" or last.output[0] != model.output_name:
         raise GainError(f"{src}: its graph carries no recorded output scale to move")

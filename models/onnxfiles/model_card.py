@@ -11,7 +11,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY
 from drive_server.serving.settings import GAIN, GAIN_OLD_NAMES, NO_GAIN, SERVING_KEY, Serving
@@ -19,6 +19,7 @@ from drive_server.serving.smoothing import NAME, OFF, OLD_NAMES
 from models.networks.architectures import ARCHITECTURES
 from models.networks.runfiles import RunPaths, RunRecord
 from models.onnxfiles.card_text import block, command, count, quoted, shown, wrap
+from models.onnxfiles.onnx_metadata import ModelInfo
 from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT
 
@@ -38,7 +39,7 @@ class ModelFile:
     """What a model file says about itself."""
 
     path: Path  # as the card's commands name it
-    info: dict[str, Any]  # its record (rbc.model); {} if none
+    info: ModelInfo  # its record (rbc.model); {} if none
     contract: dict[str, Any]  # its preprocessing (rbc.preprocess); {} if none
     smoothing: float = OFF  # the steering smoothing it asks drive_server for (1: off)
     gain: float = 1.0  # the steering gain it asks drive_server for (drive_server.serving.settings; 1: none)
@@ -69,8 +70,8 @@ def read_model_file(path: Path) -> ModelFile:
     except Exception as exc:  # ONNX Runtime's own errors, bad JSON, a bad rbc.serving
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
         raise BadValue(f"{path}: not a model file of ours ({first})") from None
-    return ModelFile(path, info if isinstance(info, dict) else {}, contract if isinstance(contract, dict) else {},
-                     serving.smoothing, serving.gain)
+    return ModelFile(path, cast(ModelInfo, info) if isinstance(info, dict) else {},  # a JSON object
+                     contract if isinstance(contract, dict) else {}, serving.smoothing, serving.gain)
 
 
 def card(src: CardSource) -> str:

@@ -4,9 +4,10 @@ write, and the one-image-in, one-steering-out graph the latter two rewrite (torc
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict, cast
 
 from drive_server.serving.contract import METADATA_KEY, METADATA_MODEL_INFO_KEY, PreprocessContract, infer_contract
 from drive_server.serving.settings import GAIN, NO_GAIN, SERVING_KEY, serving_json
@@ -14,6 +15,18 @@ from drive_server.serving.smoothing import NAME, OFF, OLD_NAMES
 
 if TYPE_CHECKING:
     import onnx
+
+
+class ModelInfo(TypedDict, total=False):
+    """The keys of a model's record (``rbc.model``) that are read back. Its writers add others (training's figures,
+    an imported model's source, an ensemble's members), which the record keeps."""
+
+    arch: str
+    behavior: str
+    parameters: int  # the network's weights
+    camera_rig: str  # the rig its frames were filmed by
+    mirror_average: bool  # the file answers the mirror average of the network
+    output_scale: float  # a gain an older rbc mirror baked into the graph
 
 
 @dataclass(frozen=True)
@@ -26,7 +39,7 @@ class SteeringGraph:
     shape: tuple[int | str | None, ...]  # the input's dimensions; a name or None where not fixed
     contract: PreprocessContract  # its metadata's, else inferred from the input shape
     meta: dict[str, str]
-    info: dict[str, Any]  # its record (rbc.model), {} if none
+    info: ModelInfo  # its record (rbc.model), {} if none
 
 
 def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
@@ -54,22 +67,22 @@ def read_steering_graph(src: Path, error: type[ValueError]) -> SteeringGraph:
     except ValueError as exc:  # json.JSONDecodeError is one
         raise error(f"{src}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
     return SteeringGraph(proto, inputs[0].name, graph.output[0].name, shape, contract, meta,
-                         info if isinstance(info, dict) else {})
+                         cast(ModelInfo, info) if isinstance(info, dict) else {})  # a JSON object
 
 
-def set_model_metadata(proto: onnx.ModelProto, info: dict[str, Any], smoothing: float = OFF,
+def set_model_metadata(proto: onnx.ModelProto, info: Mapping[str, object], smoothing: float = OFF,
                        contract: PreprocessContract | None = None, gain: float = NO_GAIN) -> None:
     """Replace ``proto``'s model info (and its contract, if given) and ask drive_server for ``smoothing`` (< 1)
     and ``gain`` (drive_server.serving.settings); keys the model already carries otherwise stay."""
     meta = {p.key: p.value for p in proto.metadata_props}
     if contract is not None:
         meta[METADATA_KEY] = contract.to_json()
-    info = {k: v for k, v in info.items() if k not in (NAME, GAIN, *OLD_NAMES)}  # what is asked is said below
+    record = {k: v for k, v in info.items() if k not in (NAME, GAIN, *OLD_NAMES)}  # what is asked is said below
     if smoothing < OFF:  # the model's record says what it asks, as rbc train's does
-        info[NAME] = smoothing
+        record[NAME] = smoothing
     if gain != NO_GAIN:
-        info[GAIN] = gain
-    meta[METADATA_MODEL_INFO_KEY] = json.dumps(info, sort_keys=True, default=str)
+        record[GAIN] = gain
+    meta[METADATA_MODEL_INFO_KEY] = json.dumps(record, sort_keys=True, default=str)
     meta.pop(SERVING_KEY, None)
     if smoothing < OFF or gain != NO_GAIN:
         meta[SERVING_KEY] = serving_json(smoothing, gain)
