@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from drive_server.serving.contract import PreprocessContract
 from drive_server.serving.model import SteeringModel
 from drive_server.serving.monitor import FRAMES_PER_SECOND, MonitorSpec
 from models.monitoring.attach import attach_monitor
@@ -118,7 +119,7 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
     return FitResult(spec, int(record.get("train_frames", 0)), record)
 
 
-def _calibration_inputs(plan: FitPlan, contract: Any, say: Callable[[str], None]) -> list[np.ndarray]:
+def _calibration_inputs(plan: FitPlan, contract: PreprocessContract, say: Callable[[str], None]) -> list[np.ndarray]:
     """One input array per calibration run: recorded logs read as the server reads them, or the model's own
     nominal runs of rbc monitor failures --set calibration (folders of run files; nominal runs only)."""
     logs = [p for p in plan.calibration if not (Path(p).is_dir() and any(Path(p).glob("*.npz")))]

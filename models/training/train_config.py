@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from models.training.knobs import check as check_knobs
 from protocol.errors import BadValue
 from protocol.facts import BEHAVIORS, FRAME_HEIGHT, FRAME_WIDTH
 from protocol.units import SpeedUnit
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 #: Brightness range of ``brightness_mode="scale"`` when none is given: gain 1 +- 0.5.
 SCALE_BRIGHTNESS_RANGE = 0.5
@@ -232,7 +235,7 @@ class TrainConfig:
             contract = replace(contract, blank_columns=turned_edge_columns(augment, contract))
         return replace(p, contract=contract, augment=augment)
 
-    def _named_like(self, target: Any) -> dict[str, Any]:
+    def _named_like(self, target: DataclassInstance) -> dict[str, Any]:  # replace()'s keywords, each its type
         """The knobs named like a field of ``target`` that are set (not None), by name."""
         names = {f.name for f in fields(target)}
         return {f.name: getattr(self, f.name) for f in knob_fields(self)

@@ -7,10 +7,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from protocol.errors import BadValue, UserError
 from protocol.runrecords import read_json, write_json
+
+if TYPE_CHECKING:
+    from tools.evaluate.runner import EvalRun
 
 RESULTS = "results.json"
 
@@ -27,9 +30,9 @@ class EvalRecord:
     experiment: its measure and figures, Table 9's cells) and ``runs`` (every finished run)."""
 
     eval_dir: Path
-    meta: Mapping[str, Any]
+    meta: Mapping[str, object]
     summary: Mapping[str, Any] = field(default_factory=dict)
-    runs: Sequence[Mapping[str, Any]] = ()
+    runs: Sequence[EvalRun] = ()
 
     @staticmethod
     def path(eval_dir: str | Path) -> Path:
@@ -61,7 +64,7 @@ class EvalRecord:
         write_json(path, {"meta": dict(self.meta), "summary": dict(self.summary), "runs": list(self.runs)})
         return path
 
-    def _meta(self, key: str) -> Any:
+    def _meta(self, key: str) -> object:
         if key not in self.meta:
             raise BadValue(f"{self.path(self.eval_dir)}: its meta has no {key!r} (written by another version)",
                            "evaluate the model again")
@@ -74,12 +77,12 @@ class EvalRecord:
     @property
     def model(self) -> Path:
         """The model file as given to ``rbc eval``."""
-        return Path(self._meta("model"))
+        return Path(str(self._meta("model")))
 
     @property
     def model_resolved(self) -> Path:
         """The model file's absolute path when it was evaluated (the given one in a record that predates it)."""
-        return Path(self.meta.get("model_resolved", self._meta("model")))
+        return Path(str(self.meta.get("model_resolved", self._meta("model"))))
 
     @property
     def model_sha256(self) -> str:
