@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import overload
 
 import numpy as np
 
@@ -136,14 +136,19 @@ def _finite(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def _pair(name: str, value: object, kind: type) -> tuple[Any, Any]:
-    items: list[Any] = list(value) if isinstance(value, list | tuple) else []
-    ok = len(items) == 2 and all(_finite(v) for v in items)
+@overload
+def _pair(name: str, value: object, kind: type[int]) -> tuple[int, int]: ...
+@overload
+def _pair(name: str, value: object, kind: type[float]) -> tuple[float, float]: ...
+def _pair(name: str, value: object, kind: type[int] | type[float]) -> tuple[float, float]:
+    items = list(value) if isinstance(value, list | tuple) else []
+    numbers = [v for v in items if isinstance(v, int | float) and _finite(v)]
+    ok = len(items) == 2 and len(numbers) == 2
     if ok and kind is int:
-        ok = all(float(v).is_integer() for v in items)
+        ok = all(float(v).is_integer() for v in numbers)
     if not ok:
         raise BadValue(f"{name} must be two {'integers' if kind is int else 'numbers'} (lo, hi), got {value!r}")
-    return kind(items[0]), kind(items[1])
+    return kind(numbers[0]), kind(numbers[1])
 
 
 def _strings(name: str, value: object) -> tuple[str, ...]:
