@@ -6,7 +6,7 @@ Written by :mod:`tools.dagger.loop` and :mod:`tools.dagger.scoring`, read by :mo
 
 from __future__ import annotations
 
-from typing import NotRequired, Required, TypedDict
+from typing import Literal, NotRequired, Required, TypedDict
 
 from models.networks.runfiles import Resolved
 
@@ -151,3 +151,50 @@ class Verdict(VerdictFrames, total=False):
     dagger_best: BestRound | None
     ratio: float
     text: Required[str]
+
+
+#: The built-in tracks whose columns the comparison's curve draws, by their summary keys.
+CurveKey = Literal["lake_eta", "mountain_eta"]
+
+
+class SummaryRow(TypedDict, total=False):
+    """One round of ``summary.json`` as the comparison reads it (:func:`tools.dagger.summary.round_row`). Each
+    scored track adds ``NAME_eta`` and ``NAME_takeovers`` and each perturbation its text; the keys of the default
+    tracks, which the curve draws, are declared."""
+
+    round: int
+    mode: str
+    beta: float
+    expert_frames: int
+    learner_steps: int
+    collection_takeovers: int
+    worlds_mean: float
+    worlds_worst: float
+    worlds_at_target: int
+    worlds_n: int
+    worlds_takeovers: int
+    lake_eta: float
+    lake_takeovers: int
+    mountain_eta: float
+    mountain_takeovers: int
+    all_mean: float
+    all_worst: float
+    all_takeovers: int
+
+
+class ComparedRow(SummaryRow, total=False):
+    """A round of either method in the comparison: its method's name, and whether it drove every world at the
+    target."""
+
+    method: str
+    every_world: bool
+
+
+class SummaryDocument(TypedDict):
+    """``summary.json``: the run's mode, config and seed, the code version and every finished round's row."""
+
+    mode: str
+    config: dict[str, object]  # DaggerConfig.to_dict()
+    seed: int
+    code_version: str
+    rounds: list[SummaryRow]

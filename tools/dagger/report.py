@@ -8,34 +8,45 @@ tracks beside it).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from protocol.errors import BadValue
 from protocol.runrecords import code_version, read_json, write_json, write_text
 from tools.dagger.config import DaggerConfig
-from tools.dagger.records import BestRound, Verdict, VerdictFrames
+from tools.dagger.records import (
+    BestRound,
+    ComparedRow,
+    CurveKey,
+    SummaryDocument,
+    SummaryRow,
+    Verdict,
+    VerdictFrames,
+)
 from tools.dagger.summary import SUMMARY_JSON
 from tools.sim.driving.rules import TARGET_ETA
 
 CURVE = "curve.png"
+#: The built-in tracks the curve draws: (summary key, name, marker, line).
+CURVE_TRACKS: tuple[tuple[CurveKey, str, str, str], ...] = (("lake_eta", "lake", "o", "-"),
+                                                             ("mountain_eta", "mountain", "^", ":"))
 
 
-def load_rows(folder: Path) -> tuple[str, list[dict[str, Any]], dict[str, Any]]:
+def load_rows(folder: Path) -> tuple[str, list[SummaryRow], SummaryDocument]:
     path = Path(folder) / SUMMARY_JSON
     if not path.is_file():
         raise BadValue(f"{folder}: no {SUMMARY_JSON} (not an rbc dagger output folder, or no round finished yet)")
-    summary = read_json(path)
+    summary: SummaryDocument = read_json(path)
     return summary["mode"], summary["rounds"], summary
 
 
-def frames_to_target(rows: list[dict[str, Any]]) -> int | None:
+def frames_to_target(rows: Sequence[SummaryRow]) -> int | None:
     """The fewest expert frames after which every unseen world was driven at >= 95 % (None: never)."""
     return next((r["expert_frames"] for r in rows if r.get("worlds_n") and r["worlds_at_target"] == r["worlds_n"]),
                 None)
 
 
-def verdict(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> Verdict:
+def verdict(dagger: Sequence[SummaryRow], bc: Sequence[SummaryRow]) -> Verdict:
     """Issue #46's target: DAgger drives every unseen world at >= 95 % with at most a third of the expert frames
     behavioral cloning needs for the same (or, where BC never gets there, a third of the most it was given)."""
     d, b = frames_to_target(dagger), frames_to_target(bc)
@@ -85,10 +96,11 @@ def compare(dagger_dir: Path, bc_dir: Path, out: Path) -> dict[str, object]:
     return result
 
 
-def merged_rows(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def merged_rows(dagger: Sequence[SummaryRow], bc: Sequence[SummaryRow]) -> list[ComparedRow]:
     """Both methods' rounds by expert frames (BC first at equal frames), each named with its beta."""
-    rows = [{**r, "method": f"DAgger (β {r['beta']:.3g})" if r["beta"] < 1 else "DAgger (expert only)"}
-            for r in dagger] + [{**r, "method": "BC"} for r in bc]
+    rows: list[ComparedRow] = [
+        {**r, "method": f"DAgger (β {r['beta']:.3g})" if r["beta"] < 1 else "DAgger (expert only)"} for r in dagger]
+    rows += [{**r, "method": "BC"} for r in bc]
     for row in rows:
         row["every_world"] = bool(row.get("worlds_n")) and row.get("worlds_at_target") == row["worlds_n"]
     return sorted(rows, key=lambda r: (r["expert_frames"], r["mode"] != "bc"))
@@ -101,7 +113,7 @@ COLUMNS = (("expert frames", "{expert_frames:,}"), ("method", "{method}"),
            ("lake η", "{lake_eta:.1f} %"), ("mountain η", "{mountain_eta:.1f} %"))
 
 
-def comparison_table(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> str:
+def comparison_table(dagger: Sequence[SummaryRow], bc: Sequence[SummaryRow]) -> str:
     """One row per method and budget: the worlds' mean and worst eta, the worlds at >= 95 %, the take-overs on
     the worlds and tracks together, and each built-in track (a column a run lacks prints as "–")."""
     lines = ["| " + " | ".join(head for head, _ in COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
@@ -116,7 +128,7 @@ def comparison_table(dagger: list[dict[str, Any]], bc: list[dict[str, Any]]) -> 
     return "\n".join(lines) + "\n"
 
 
-def plot_curve(dagger: list[dict[str, Any]], bc: list[dict[str, Any]], path: Path) -> Path:
+def plot_curve(dagger: Sequence[SummaryRow], bc: Sequence[SummaryRow], path: Path) -> Path:
     """eta against expert frames: the unseen worlds' mean and worst world (left), the worlds driven at >= 95 %
     (middle), lake and mountain (right)."""
     import matplotlib
@@ -126,7 +138,8 @@ def plot_curve(dagger: list[dict[str, Any]], bc: list[dict[str, Any]], path: Pat
 
     fig, (left, middle, right) = plt.subplots(1, 3, figsize=(15, 4.3), dpi=110)
     styles = {"dagger": ("tab:blue", "DAgger"), "bc": ("tab:orange", "BC")}
-    n = next((r["worlds_n"] for r in dagger + bc if r.get("worlds_n")), 0)
+    both = [*dagger, *bc]
+    n = next((r["worlds_n"] for r in both if r.get("worlds_n")), 0)
     for name, rows in (("bc", bc), ("dagger", dagger)):
         color, label = styles[name]
         xs = [r["expert_frames"] for r in rows]
@@ -134,10 +147,10 @@ def plot_curve(dagger: list[dict[str, Any]], bc: list[dict[str, Any]], path: Pat
             left.plot(xs, [r["worlds_mean"] for r in rows], "-o", color=color, label=f"{label}: mean of the worlds")
             left.plot(xs, [r["worlds_worst"] for r in rows], "--s", color=color, label=f"{label}: worst world")
             middle.plot(xs, [r["worlds_at_target"] for r in rows], "-o", color=color, label=label)
-        for track, marker, dash in (("lake", "o", "-"), ("mountain", "^", ":")):
-            if rows and f"{track}_eta" in rows[0]:
-                right.plot(xs, [r[f"{track}_eta"] for r in rows], dash + marker, color=color, label=f"{label}: {track}")
-    frames = sorted({r["expert_frames"] for r in dagger + bc})
+        for key, track, marker, dash in CURVE_TRACKS:
+            if rows and key in rows[0]:
+                right.plot(xs, [r[key] for r in rows], dash + marker, color=color, label=f"{label}: {track}")
+    frames = sorted({r["expert_frames"] for r in both})
     for ax, title in ((left, f"{n} unseen generated worlds (evaluation seeds)"),
                       (middle, f"unseen worlds driven at >= {TARGET_ETA:.0f} %"), (right, "built-in tracks")):
         if ax is middle:
@@ -154,8 +167,7 @@ def plot_curve(dagger: list[dict[str, Any]], bc: list[dict[str, Any]], path: Pat
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
-    low = min([r.get("worlds_worst", 100) for r in dagger + bc]
-              + [r.get(k, 100) for r in dagger + bc for k in ("lake_eta", "mountain_eta")])
+    low = min([r.get("worlds_worst", 100) for r in both] + [r.get(k, 100) for r in both for k, *_ in CURVE_TRACKS])
     for ax in (left, right):
         ax.set_ylim(max(0.0, low - 5), 101)
     fig.suptitle("DAgger against behavioral cloning at equal expert frames (rbc dagger)", fontsize=11)
