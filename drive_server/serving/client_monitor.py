@@ -144,14 +144,28 @@ class ClientMonitor:
         self.last: MonitorReading | None = None
         self.seconds = 0.0  # time spent in the monitor, for the stage timings
 
-    def observe(self, x: np.ndarray) -> MonitorReading | None:
-        """The reading for one preprocessed frame, or None once the monitor is off (never raises)."""
+    @property
+    def wants_steering(self) -> bool:
+        """Its graph takes the served network's steering beside the frame (the spec's ``inputs``)."""
+        return self.state.spec.wants_steering
+
+    def observe(self, x: np.ndarray, steering: float | None = None) -> MonitorReading | None:
+        """The reading for one preprocessed frame, or None once the monitor is off (never raises). ``steering``:
+        the served network's own output for ``x`` (before gain, clamping and smoothing), passed to a graph that
+        takes it; such a monitor shown no steering is switched off like any failing one. Callers go through
+        :meth:`drive_server.serving.pipeline.DrivePipeline.observe`, which supplies it."""
         if self.failed is not None:
             return None
         t0 = perf_counter()
         before = self.state.level
         try:
-            reading = self.state.update(self.graph.score(x))
+            if self.wants_steering:
+                if steering is None or not math.isfinite(steering):
+                    raise MonitorFault(f"the monitor takes the served steering, got {steering!r}")
+                score = self.graph.score(x, steering)
+            else:
+                score = self.graph.score(x)
+            reading = self.state.update(score)
         except Exception as exc:  # a monitor that fails never stops steering: it is switched off
             self._fail(f"{type(exc).__name__}: {exc}"[:200])
             return None

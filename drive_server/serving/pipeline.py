@@ -91,10 +91,26 @@ class DrivePipeline:
         answer times the gain, smoothed by the client's ``smoother`` (:meth:`smoother`) if given; ``monitor``
         scores the same input (``monitor.last``)."""
         x = preprocess(rgb, self.contract)
-        steering = self._usable(self.model.predict(x))
-        if monitor is not None:
-            monitor.observe(x)
+        value = self.model.predict(x)
+        steering = self._usable(value)
+        self.observe(monitor, x, value)
         return smoother(steering) if smoother is not None else steering
+
+    def observe(self, monitor: ClientMonitor | None, x: np.ndarray,
+                value: float | None = None) -> MonitorReading | None:
+        """THE way a preprocessed frame reaches a client's monitor (the server, rbc sim, drive-log, eval, the
+        benchmark and the env all come here): its reading, None without a monitor or once it is off. ``value``:
+        the network's own output for ``x`` (before gain, clamping and smoothing), for a monitor whose graph takes
+        the served steering; run here when the caller has none (the env scores frames an agent steers). Never
+        raises: a monitor or a network that fails here switches the monitor off, steering goes on."""
+        if monitor is None:
+            return None
+        if value is None and monitor.wants_steering and monitor.failed is None:
+            try:
+                value = self.model.predict(x)
+            except Exception:  # the monitor reports it (no steering given) and switches itself off
+                value = None
+        return monitor.observe(x, value)
 
     def _usable(self, value: float) -> float:
         """The network's output as a steering command: finite, times the serving gain, clamped to -1..1."""
@@ -137,7 +153,7 @@ class DrivePipeline:
         value = self.model.predict(x)
         t3 = perf_counter()
         steering = self._usable(value)
-        reading = monitor.observe(x) if monitor is not None else None
+        reading = self.observe(monitor, x, value)
         command = self.control(smoother(steering) if smoother is not None else steering, telemetry.speed, reading)
         t4 = perf_counter()
         return command, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)

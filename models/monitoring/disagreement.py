@@ -58,14 +58,21 @@ def shift_disagreement_graph(src: Path, pixels: int = SHIFT_PIXELS) -> bytes:
     return model.SerializeToString()
 
 
-def graph_scores(graph: bytes, frames: np.ndarray, batch_size: int = 256) -> np.ndarray:
-    """A monitor graph's per-frame scores on preprocessed frames (ONNX Runtime; any monitor graph)."""
+def graph_scores(graph: bytes, frames: np.ndarray, batch_size: int = 256,
+                 steering: np.ndarray | None = None) -> np.ndarray:
+    """A monitor graph's per-frame scores on preprocessed frames (ONNX Runtime; any monitor graph); ``steering``:
+    the served network's output on each frame, for a graph that takes it as its second input."""
     import onnxruntime as ort
 
     session = ort.InferenceSession(graph, providers=["CPUExecutionProvider"])
-    name = session.get_inputs()[0].name
+    names = [i.name for i in session.get_inputs()]
+    if (len(names) > 1) != (steering is not None):
+        raise BadValue(f"the monitor's graph takes {len(names)} input(s); give the served steering exactly when it "
+                       "takes two")
     out = []
     for start in range(0, len(frames), batch_size):
-        batch = np.ascontiguousarray(frames[start:start + batch_size], dtype=np.float32)
-        out.append(np.asarray(session.run(None, {name: batch})[0]).reshape(-1))
+        feed = {names[0]: np.ascontiguousarray(frames[start:start + batch_size], dtype=np.float32)}
+        if steering is not None:
+            feed[names[1]] = np.asarray(steering[start:start + batch_size], np.float32).reshape(-1, 1)
+        out.append(np.asarray(session.run(None, feed)[0]).reshape(-1))
     return np.concatenate(out) if out else np.zeros(0, np.float32)

@@ -1,6 +1,6 @@
 """``rbc monitor fit``'s work: train the score (the autoencoder on nominal frames, or the failure predictor on
-runs that failed), calibrate it on other nominal runs, and write the steering model's file with the monitor
-attached."""
+runs that failed) or build it (shift; ensemble, from members trained elsewhere), calibrate it on other nominal
+runs, and write the steering model's file with the monitor attached."""
 
 from __future__ import annotations
 
@@ -14,13 +14,15 @@ import numpy as np
 
 from drive_server.serving.contract import PreprocessContract
 from drive_server.serving.model import SteeringModel
-from drive_server.serving.monitor import FRAMES_PER_SECOND, MonitorSpec
+from drive_server.serving.monitor import FRAME, FRAMES_PER_SECOND, STEERING, MonitorSpec
 from models.monitoring.attach import attach_monitor
 from models.monitoring.autoencoder import SCORE_NAME as AUTOENCODER
 from models.monitoring.autoencoder import export_score_graph, train_autoencoder
 from models.monitoring.calibrate import calibrate
 from models.monitoring.disagreement import SCORE_NAME as SHIFT
 from models.monitoring.disagreement import SHIFT_PIXELS, graph_scores, shift_disagreement_graph
+from models.monitoring.ensemble import SCORE_NAME as ENSEMBLE
+from models.monitoring.ensemble import check_ensemble_members, ensemble_score_graph, network_outputs
 from models.monitoring.failures import LabelRules, labels, load_run, run_files
 from models.monitoring.frames import load_runs
 from models.monitoring.predictor import SCORE_NAME as PREDICTOR
@@ -31,7 +33,7 @@ log = logging.getLogger(__name__)
 
 #: The scores ``rbc monitor fit`` can attach (``keep``: the model file's own monitor, calibrated afresh).
 KEEP = "keep"
-SCORES = (AUTOENCODER, SHIFT, PREDICTOR, KEEP)
+SCORES = (AUTOENCODER, SHIFT, PREDICTOR, ENSEMBLE, KEEP)
 
 
 @dataclass(frozen=True)
@@ -44,8 +46,10 @@ class FitPlan:
     calibration: tuple[Path, ...]
     # or "shift": the model's disagreement with itself on a moved frame (no training); "predictor": a network that
     # learns from runs that failed (rbc monitor failures) how likely a failure is within a few seconds; or "keep":
-    # the monitor the model file already carries, calibrated afresh (another target rate, other nominal driving)
+    # the monitor the model file already carries, calibrated afresh (another target rate, other nominal driving);
+    # "ensemble": the served steering against ``members``, other networks of the model's recipe (no training here)
     score: str = AUTOENCODER
+    members: tuple[Path, ...] = ()
     epochs: int = 6
     stride: int = 2  # every 2nd training frame: neighbours at 15 Hz are near copies
     seed: int = 0
@@ -63,6 +67,8 @@ class FitPlan:
         if (self.score in (AUTOENCODER, PREDICTOR) and not self.train) or not self.calibration:
             raise BadValue("give calibration data (--calibration), and for the autoencoder and the predictor "
                            "training data (--data)")
+        if self.members and self.score != ENSEMBLE:
+            raise BadValue(f"members (--member) are for --score {ENSEMBLE}, not {self.score}")
         if self.epochs < 1 or self.stride < 1:
             raise BadValue(f"epochs and stride must be >= 1, got {self.epochs} and {self.stride}")
 
@@ -77,6 +83,7 @@ class FitResult:
 def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResult:
     contract = SteeringModel(plan.model).contract
     record: dict[str, Any] = {"score": plan.score, "seed": plan.seed}
+    inputs: tuple[str, ...] = (FRAME,)
     if plan.score == AUTOENCODER:
         say(f"reading training frames from {len(plan.train)} folder(s) (every {plan.stride}. frame)")
         train = np.concatenate(load_runs(list(plan.train), contract, plan.stride,
@@ -100,21 +107,31 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
     elif plan.score == SHIFT:
         graph = shift_disagreement_graph(plan.model)
         record |= {"shift_pixels": SHIFT_PIXELS}
+    elif plan.score == ENSEMBLE:
+        members = check_ensemble_members(plan.model, plan.members)
+        say(f"building the ensemble monitor of {len(members)} members")
+        graph = ensemble_score_graph(plan.model, plan.members)
+        inputs = (FRAME, STEERING)
+        record |= {"members": members, "spread": True}
     else:
         found = SteeringModel(plan.model).monitor()
         if found is None:
             raise BadValue(f"{plan.model.name} carries no monitor to calibrate afresh (--score keep)")
         old, graph_obj = found
-        graph = graph_obj.model_bytes
+        graph, inputs = graph_obj.model_bytes, old.inputs
         kept = {k: v for k, v in old.calibration.items() if k in ("train_frames", "train", "epochs", "shift_pixels",
-                                                                 "seed")}
+                                                                 "seed", "members", "spread")}
         record |= {**kept, "score": old.score, "recalibrated": True}
     say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
     runs = _calibration_inputs(plan, contract, say)
-    cal = calibrate([graph_scores(graph, r) for r in runs], plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
+    if STEERING in inputs:  # the steering the server would feed: the served network's own, on the same frames
+        say("running the served model on the calibration frames")
+    scores = [graph_scores(graph, r, steering=network_outputs(plan.model, r) if STEERING in inputs else None)
+              for r in runs]
+    cal = calibrate(scores, plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
                     source=", ".join(p.name for p in plan.calibration))
     record = {**cal.record, **record}
-    spec = MonitorSpec(str(record["score"]), cal.warn, cal.alarm, plan.window, record)
+    spec = MonitorSpec(str(record["score"]), cal.warn, cal.alarm, plan.window, record, inputs)
     attach_monitor(plan.model, plan.out, spec, graph)
     return FitResult(spec, int(record.get("train_frames", 0)), record)
 

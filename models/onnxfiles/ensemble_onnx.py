@@ -20,7 +20,7 @@ from onnx import compose, helper
 from drive_server.serving.contract import PreprocessContract
 from drive_server.serving.settings import SERVING_KEY, Serving
 from drive_server.serving.smoothing import NAME, OLD_NAMES
-from models.onnxfiles.onnx_metadata import read_steering_graph, set_model_metadata
+from models.onnxfiles.onnx_metadata import SteeringGraph, read_steering_graph, set_model_metadata
 from protocol import runrecords
 from protocol.errors import BadValue
 
@@ -52,6 +52,39 @@ def _serving(srcs: Sequence[Path], metas: Sequence[dict[str, str]], smoothing: f
     return Serving(asked.pop(), gain)
 
 
+def check_members(srcs: Sequence[Path], members: Sequence[SteeringGraph]) -> None:
+    """EnsembleError (one line) unless every member reads the first's input through the same preprocessing
+    contract and the same ONNX opset (what lets one graph hold them all)."""
+    first = members[0]
+
+    def opsets(proto: onnx.ModelProto) -> set[tuple[str, int]]:
+        return {(o.domain, o.version) for o in proto.opset_import}
+
+    for src, member in zip(srcs[1:], members[1:], strict=True):
+        if member.contract != first.contract or member.shape[1:] != first.shape[1:]:
+            raise EnsembleError(f"{src}: its preprocessing differs from {Path(srcs[0]).name}'s; members must read "
+                                "the same input")
+        if opsets(member.proto) != opsets(first.proto):
+            raise EnsembleError(f"{src}: its ONNX opset differs from {Path(srcs[0]).name}'s")
+
+
+def member_nodes(members: Sequence[SteeringGraph], input_name: str,
+                 ) -> tuple[list[onnx.NodeProto], list[onnx.TensorProto], list[str]]:
+    """Every member's graph, its names prefixed ``m0_``, ``m1_``..., all reading the one input ``input_name``:
+    (nodes, initializers, each member's output name)."""
+    nodes: list[onnx.NodeProto] = []
+    initializers: list[onnx.TensorProto] = []
+    outputs: list[str] = []
+    for k, member in enumerate(members):
+        prefixed = compose.add_prefix(member.proto, f"m{k}_")
+        for node in prefixed.graph.node:  # every member reads the one input
+            node.input[:] = [input_name if n == f"m{k}_{member.input_name}" else n for n in node.input]
+        nodes.extend(prefixed.graph.node)
+        initializers.extend(prefixed.graph.initializer)
+        outputs.append(f"m{k}_{member.output_name}")
+    return nodes, initializers, outputs
+
+
 def ensemble_onnx(srcs: Sequence[Path], dst: Path, smoothing: float | None = None, seed: int = 0) -> float:
     """Write ``dst`` (atomically): the mean of ``srcs``' outputs. Return the max |ensemble - mean of members| on
     random inputs (``seed``). ``smoothing`` (< 1 smooths, 1 does not) overrides what the members ask."""
@@ -59,27 +92,11 @@ def ensemble_onnx(srcs: Sequence[Path], dst: Path, smoothing: float | None = Non
         raise EnsembleError("an ensemble needs at least two models")
     members = [read_steering_graph(s, EnsembleError) for s in srcs]
     first = members[0]
-
-    def opsets(proto: onnx.ModelProto) -> set[tuple[str, int]]:
-        return {(o.domain, o.version) for o in proto.opset_import}
-
-    for src, member in zip(srcs[1:], members[1:], strict=True):
-        if member.contract != first.contract:
-            raise EnsembleError(f"{src}: its preprocessing differs from {srcs[0].name}'s; members must read the "
-                                "same input")
-        if opsets(member.proto) != opsets(first.proto):
-            raise EnsembleError(f"{src}: its ONNX opset differs from {srcs[0].name}'s")
+    check_members(srcs, members)
     serving = _serving(srcs, [m.meta for m in members], smoothing)
 
     image = next(i for i in first.proto.graph.input if i.name == first.input_name)
-    nodes, initializers, outputs = [], [], []
-    for k, member in enumerate(members):
-        prefixed = compose.add_prefix(member.proto, f"m{k}_")
-        for node in prefixed.graph.node:  # every member reads the one input
-            node.input[:] = [first.input_name if n == f"m{k}_{member.input_name}" else n for n in node.input]
-        nodes.extend(prefixed.graph.node)
-        initializers.extend(prefixed.graph.initializer)
-        outputs.append(f"m{k}_{member.output_name}")
+    nodes, initializers, outputs = member_nodes(members, first.input_name)
     nodes.append(helper.make_node("Mean", outputs, [first.output_name]))
     graph = helper.make_graph(nodes, "rbc_ensemble", [image], [first.proto.graph.output[0]], initializers)
     out = helper.make_model(graph, opset_imports=list(first.proto.opset_import), ir_version=first.proto.ir_version)

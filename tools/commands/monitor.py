@@ -34,11 +34,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="autoencoder: SelfOracle's reconstruction error (trained on --data); shift: the model's "
                           "disagreement with itself on the frame moved 3 pixels sideways (no training); predictor: "
                           "how likely a failure is within 3 s, learnt from rbc monitor failures' runs (--data); "
-                          "keep: the "
+                          "ensemble: the served steering's distance to the mean of other networks of the model's "
+                          "recipe (--member, two or more) plus their spread; keep: the "
                           "monitor MODEL already carries, its thresholds set afresh (default %(default)s)")
     fit.add_argument("--data", type=Path, action="append", default=[], metavar="DIR",
                      help="nominal driving to train the autoencoder on (Udacity-format folder, e.g. from rbc collect), "
                           "or for the predictor a folder of rbc monitor failures (repeat)")
+    fit.add_argument("--member", dest="members", type=Path, action="append", default=[], metavar="M.onnx",
+                     help="for --score ensemble: a steering model trained to MODEL's recipe with another seed "
+                          "(rbc train --recipe R --seed N), with exactly MODEL's preprocessing (repeat, two or more)")
     fit.add_argument("--calibration", type=Path, action="append", required=True, metavar="DIR",
                      help="OTHER nominal driving to set the thresholds on, at least an hour for the default rates "
                           "(repeat; never evaluation worlds)")
@@ -168,11 +172,11 @@ def _fit(args: argparse.Namespace) -> int:
 
     if args.out.suffix != ".onnx":
         raise CommandError(f"--out {args.out}: give a path ending in .onnx")
-    for folder in [args.model, *args.data, *args.calibration]:
+    for folder in [args.model, *args.members, *args.data, *args.calibration]:
         if not folder.exists():
             raise CommandError(f"no such file or folder: {folder}")
     plan = FitPlan(args.model, args.out, tuple(args.data), tuple(args.calibration), score=args.score,
-                   epochs=args.epochs,
+                   members=tuple(args.members), epochs=args.epochs,
                    stride=args.stride, seed=args.seed, warnings_per_hour=args.warnings_per_hour,
                    alarms_per_hour=args.alarms_per_hour)
     result = fit_monitor(plan, say=print)

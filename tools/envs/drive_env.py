@@ -255,7 +255,7 @@ class DriveEnv(gym.Env):
         if jpeg:
             info["jpeg"] = jpeg  # the centre frame's JPEG as sent on the wire (OnnxPolicy decodes it as drive_server)
         if self._monitor is not None and self._monitor_pipeline is not None and self._frame is not None:
-            reading = self._monitor.observe(self._monitor_input(jpeg))
+            reading = self._monitor_pipeline.observe(self._monitor, self._monitor_input(jpeg))
             info["monitor"] = None if reading is None else {"score": reading.score, "mean": reading.mean,
                                                              "state": reading.level.label}
         return info

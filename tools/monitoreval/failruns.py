@@ -31,9 +31,9 @@ class _Recording:
         self.primary = primary
         self.inputs: list[np.ndarray] = []
 
-    def observe(self, x: np.ndarray) -> MonitorReading | None:
+    def observe(self, x: np.ndarray, steering: float | None = None) -> MonitorReading | None:
         self.inputs.append(quantise(x[0]))
-        return self.primary.observe(x)
+        return self.primary.observe(x, steering)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.primary, name)

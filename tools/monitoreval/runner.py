@@ -82,10 +82,10 @@ class _Shadowed:
         self.primary, self.shadows = primary, shadows
         self.scores: list[list[float]] = [[] for _ in shadows]
 
-    def observe(self, x: np.ndarray) -> MonitorReading | None:
-        reading = self.primary.observe(x)
+    def observe(self, x: np.ndarray, steering: float | None = None) -> MonitorReading | None:
+        reading = self.primary.observe(x, steering)
         for graph, out in zip(self.shadows, self.scores, strict=True):
-            out.append(graph.score(x))
+            out.append(graph.score(x, steering) if graph.wants_steering else graph.score(x))
         return reading
 
     def __getattr__(self, name: str) -> Any:  # last, failed, state: the primary's
