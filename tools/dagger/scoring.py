@@ -20,9 +20,10 @@ from typing import Any
 from protocol.runrecords import file_sha256, read_json, write_json, write_text
 from tools.dagger.config import PERTURBATIONS, DaggerConfig
 from tools.dagger.records import RangeScore, RoundScores, TrackScore
+from tools.evaluate.evalrecord import EvalRun
 from tools.evaluate.experiments import is_autonomous, run_eta
 from tools.evaluate.journal import run_code
-from tools.evaluate.runner import DriverSpec, EvalRun, Runner, read_journal
+from tools.evaluate.runner import DriverSpec, Runner, read_journal
 from tools.evaluate.suite import SuiteConfig, run_suite
 from tools.sim.driving.rules import TARGET_ETA
 

@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING
 
 from protocol.errors import UserError
 from tools.errors import CommandError
-from tools.evaluate.runner import DriverSpec, EvalRun, Runner, Task, pass_on, run_task
+from tools.evaluate.evalrecord import EvalRun
+from tools.evaluate.runner import DriverSpec, Runner, Task, pass_on, run_task
 from tools.ray_support import BACKENDS, INSTALL_HINT, import_ray, init_ray
 
 if TYPE_CHECKING:

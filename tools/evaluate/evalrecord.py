@@ -1,21 +1,48 @@
 """An evaluation's record, ``DIR/results.json`` (``rbc eval --out DIR``): the one module that names the file, writes it
 and reads it back typed, for ``rbc compare`` and anyone else who reads an evaluation, so none spells its name or its
-keys again."""
+keys again; and its runs' records (:class:`EvalRun`, :class:`Retry`), apart from the runner that drives them so that
+what reads them need not import it."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Required, TypedDict
 
 from protocol.errors import BadValue, UserError
 from protocol.runrecords import read_json, write_json
+from tools.sim.driving.scenario import RunResultRecord
 
 if TYPE_CHECKING:
-    from tools.evaluate.runner import EvalRun
+    from tools.evaluate.experiments import AxisValue
 
 RESULTS = "results.json"
+
+
+class EvalRun(RunResultRecord, total=False):
+    """One run of an evaluation as the journal and ``results.json`` hold it: the task, then the run's record
+    (:class:`~tools.sim.driving.scenario.RunResultRecord`), then whether it was autonomous, the monitor's figures
+    (``--monitor``) and the trajectory map of a run that was not autonomous."""
+
+    experiment: Required[str]
+    behavior: Required[str]
+    value: Required[AxisValue]
+    seed: Required[int]
+    scenario: Required[dict[str, object]]  # the ScenarioConfig keyword arguments (the task's key)
+    autonomous: bool
+    monitor: dict[str, object]
+    map: str
+
+
+class Retry(TypedDict):
+    """A run a backend retried after a failure (``meta.retried`` of ``results.json``)."""
+
+    experiment: str
+    value: AxisValue
+    seed: int
+    attempt: int
+    error: str
 
 
 class NoEvaluationError(UserError):

@@ -14,7 +14,8 @@ from pathlib import Path
 from protocol.codeversion import ROOT, code_digest
 from protocol.runrecords import read_json, write_json, write_text
 from tools.errors import CommandError
-from tools.evaluate.runner import DriverSpec, EvalRun, read_journal, spec_dict
+from tools.evaluate.evalrecord import EvalRun
+from tools.evaluate.runner import DriverSpec, read_journal, spec_dict
 
 log = logging.getLogger(__name__)
 

@@ -21,7 +21,7 @@ from tools.monitoreval.summary import run_trace
 if TYPE_CHECKING:
     from drive_server.serving.client_monitor import MonitorPolicy
     from drive_server.serving.monitor import MonitorSpec
-    from tools.evaluate.runner import EvalRun
+    from tools.evaluate.evalrecord import EvalRun
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.scenario import RunResult
 

@@ -11,7 +11,7 @@ from tools.evaluate.experiments import AUTONOMY_RULE, EXPERIMENTS, Experiment
 from tools.evaluate.paper import PAPER_TABLE9
 
 if TYPE_CHECKING:
-    from tools.evaluate.runner import EvalRun
+    from tools.evaluate.evalrecord import EvalRun
 
 log = logging.getLogger(__name__)
 

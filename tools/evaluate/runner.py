@@ -16,11 +16,11 @@ from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Required, TypedDict
+from typing import TYPE_CHECKING, Any
 
 from drive_server.serving.control import ControlLaw
 from protocol.appending import append_record
-from tools.sim.driving.scenario import RunResultRecord
+from tools.evaluate.evalrecord import EvalRun, Retry
 
 if TYPE_CHECKING:
     from tools.evaluate.experiments import AxisValue
@@ -42,31 +42,6 @@ class DriverSpec:
     def __post_init__(self) -> None:
         if self.model is None and self.server is None:
             raise ValueError("give a model (in-process) or a server URL")
-
-
-class EvalRun(RunResultRecord, total=False):
-    """One run of an evaluation as the journal and ``results.json`` hold it: the task, then the run's record
-    (:class:`~tools.sim.driving.scenario.RunResultRecord`), then whether it was autonomous, the monitor's figures
-    (``--monitor``) and the trajectory map of a run that was not autonomous."""
-
-    experiment: Required[str]
-    behavior: Required[str]
-    value: Required[AxisValue]
-    seed: Required[int]
-    scenario: Required[dict[str, object]]  # the ScenarioConfig keyword arguments (the task's key)
-    autonomous: bool
-    monitor: dict[str, object]
-    map: str
-
-
-class Retry(TypedDict):
-    """A run a backend retried after a failure (``meta.retried`` of ``results.json``)."""
-
-    experiment: str
-    value: AxisValue
-    seed: int
-    attempt: int
-    error: str
 
 
 @dataclass(frozen=True)

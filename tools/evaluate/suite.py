@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol.facts import DEPLOY_SPEED_KMH
+from tools.evaluate.evalrecord import EvalRun
 from tools.evaluate.experiments import (
     EXPERIMENTS,
     PAPER_EXPERIMENTS,
@@ -25,7 +26,7 @@ from tools.evaluate.experiments import (
     is_autonomous,
     run_eta,
 )
-from tools.evaluate.runner import EvalRun, Runner, Task
+from tools.evaluate.runner import Runner, Task
 from tools.evaluate.search import SearchResult, step_outward
 from tools.sim.render.camera import DEFAULT_RIG
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS
