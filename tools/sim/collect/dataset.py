@@ -32,7 +32,7 @@ from protocol.jpeg import encode_jpeg
 from protocol.rigfile import write_rig
 from protocol.units import from_kmh
 from tools.sim.driving.autopilot import Autopilot, AutopilotParams
-from tools.sim.driving.rules import LapResult
+from tools.sim.driving.laps import LapResult
 from tools.sim.driving.scenario import ScenarioConfig
 from tools.sim.driving.simulation import Simulation
 from tools.sim.track.cones import place_cones

@@ -11,12 +11,8 @@ import numpy as np
 from protocol import SpeedUnit, SteerCommand
 from protocol.errors import BadValue
 from protocol.facts import DEPLOY_SPEED_KMH
-from tools.sim.driving.rules import (
-    Intervention,
-    LapRecord,
-    LapResult,
-    Rules,
-)
+from tools.sim.driving.laps import LapRecord, LapResult
+from tools.sim.driving.rules import Intervention, Rules
 from tools.sim.render.camera import DEFAULT_RIG, camera_rig
 from tools.sim.vehicle.kinematic import VEHICLE_KINDS, VehicleState, kmh_to_mps
 

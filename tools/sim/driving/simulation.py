@@ -12,17 +12,8 @@ import numpy as np
 
 from protocol import SpeedUnit, SteerCommand, encode_telemetry
 from protocol.units import from_kmh
-from tools.sim.driving.rules import (
-    DEFAULT_RULES,
-    Cause,
-    Intervention,
-    LapResult,
-    LapScorer,
-    Referee,
-    Rules,
-    TrackFollower,
-    body_hits,
-)
+from tools.sim.driving.laps import LapResult, LapScorer
+from tools.sim.driving.rules import DEFAULT_RULES, Cause, Intervention, Referee, Rules, TrackFollower, body_hits
 from tools.sim.driving.scenario import ScenarioConfig, Trace
 from tools.sim.track.cones import place_cones
 from tools.sim.track.files import get_track
