@@ -28,7 +28,7 @@ from tools.bench.soak_mix import REPLY_TIMEOUT_S, SoakMix, Tally
 from tools.wire.frames import SourceFrame
 from tools.wire.unity_client import UnityWireClient
 
-__all__ = ["EDGE_WINDOW_S", "Sample", "Soak", "SoakConfig", "Tally", "check_recording"]
+__all__ = ["EDGE_WINDOW_S", "SampleRow", "Soak", "SoakConfig", "Tally", "check_recording"]
 
 #: Length of the windows whose p99 are compared (the first and the last of the run).
 EDGE_WINDOW_S = 60.0
@@ -61,8 +61,9 @@ class SoakConfig:
         return [float(r) for r in np.linspace(self.min_hz, self.max_hz, self.clients)]
 
 
-@dataclass
-class Sample:
+class SampleRow(TypedDict):
+    """One sample of the server every ``sample_s``: its memory, open files, and the latency of that window."""
+
     t_s: float
     rss_mib: float | None
     fds: int | None
@@ -77,10 +78,10 @@ class Soak(SoakMix):
     def __init__(self, url: str, pid: int | None, frames: list[SourceFrame], config: SoakConfig) -> None:
         super().__init__(url, frames, config.malformed_every_s, config.reconnect_every_s)
         self.pid, self.config = pid, config
-        self.samples: list[Sample] = []
+        self.samples: list[SampleRow] = []
 
     # -- the run ----------------------------------------------------------------------------------
-    def run(self, progress: Callable[[float, Sample], None] | None = None) -> SoakResult:
+    def run(self, progress: Callable[[float, SampleRow], None] | None = None) -> SoakResult:
         cfg = self.config
         with UnityWireClient(self.url, timeout=REPLY_TIMEOUT_S) as client:  # the recorder opens its log
             for payload in self.payloads[:3]:
@@ -100,7 +101,8 @@ class Soak(SoakMix):
             now = time.perf_counter() - self.t0
             if now >= next_sample - 1e-6:
                 frames, p50, p99 = self._window(next_sample - cfg.sample_s, next_sample)
-                self.samples.append(Sample(round(now, 1), rss_mib(self.pid), open_fds(self.pid), frames, p50, p99))
+                self.samples.append({"t_s": round(now, 1), "rss_mib": rss_mib(self.pid), "fds": open_fds(self.pid),
+                                     "frames": frames, "p50_ms": p50, "p99_ms": p99})
                 next_sample += cfg.sample_s
                 if progress is not None:
                     progress(min(now, cfg.duration_s), self.samples[-1])
@@ -112,7 +114,7 @@ class Soak(SoakMix):
         edge = min(EDGE_WINDOW_S, cfg.duration_s / 3)
         _, p50_first, p99_first = self._window(0.0, edge)
         _, p50_last, p99_last = self._window(cfg.duration_s - edge, cfg.duration_s)
-        warm = next((s for s in self.samples if s.t_s >= edge), None)
+        warm = next((s for s in self.samples if s["t_s"] >= edge), None)
         # the latency per whole window of EDGE_WINDOW_S (a p99 over 10 s is the 9th-worst frame)
         minutes: list[WindowRow] = []
         for k in range(int(cfg.duration_s // edge)):
@@ -125,12 +127,12 @@ class Soak(SoakMix):
             "double_answered": tally.double_answered, "wrong_kind": tally.wrong_kind,
             "driving_disconnects": tally.disconnects, "malformed": tally.malformed, "reconnects": tally.reconnects,
             "idle_sessions": tally.idle_sessions, "live_events": tally.live_events,
-            "rss_mib_before": rss_before, "rss_mib_start": warm.rss_mib if warm else None, "rss_mib_end": rss_end,
-            "fds_start": fds_before, "fds_running_start": warm.fds if warm else None, "fds_running_end": fds_running,
+            "rss_mib_before": rss_before, "rss_mib_start": warm["rss_mib"] if warm else None, "rss_mib_end": rss_end,
+            "fds_start": fds_before, "fds_running_start": warm["fds"] if warm else None, "fds_running_end": fds_running,
             "fds_end": fds_end,
             "edge_window_s": edge, "p50_ms_first_minute": p50_first, "p99_ms_first_minute": p99_first,
             "p50_ms_last_minute": p50_last, "p99_ms_last_minute": p99_last,
-            "samples": [_sample_row(s) for s in self.samples], "minutes": minutes, "errors": tally.errors,
+            "samples": list(self.samples), "minutes": minutes, "errors": tally.errors,
         }
 
     def _window(self, a: float, b: float) -> tuple[int, float | None, float | None]:
@@ -144,22 +146,6 @@ class Soak(SoakMix):
             return 0, None, None
         arr = np.asarray(ms) * 1e3
         return int(arr.size), round(float(np.percentile(arr, 50)), 3), round(float(np.percentile(arr, 99)), 3)
-
-
-class SampleRow(TypedDict):
-    """A :class:`Sample` as the result holds it."""
-
-    t_s: float
-    rss_mib: float | None
-    fds: int | None
-    frames: int
-    p50_ms: float | None
-    p99_ms: float | None
-
-
-def _sample_row(s: Sample) -> SampleRow:
-    return {"t_s": s.t_s, "rss_mib": s.rss_mib, "fds": s.fds, "frames": s.frames, "p50_ms": s.p50_ms,
-            "p99_ms": s.p99_ms}
 
 
 class WindowRow(TypedDict):

@@ -15,7 +15,7 @@ from pathlib import Path
 from protocol.errors import BadValue
 from protocol.runrecords import code_version, file_sha256, write_json
 from tools.bench.fuzz_campaign import DEFAULT_LOG
-from tools.bench.soak import SoakConfig, SoakResult, check_recording
+from tools.bench.soak import SampleRow, SoakConfig, SoakResult, check_recording
 from tools.wire.frames import log_frames, synthetic_frames
 
 _DEFAULTS = SoakConfig()
@@ -83,10 +83,10 @@ def run(args: argparse.Namespace) -> int:
           f"an idle socket, malformed frames every {config.malformed_every_s:g} s, the live view; "
           f"{config.duration_s:g} s")
 
-    def progress(t: float, sample) -> None:
+    def progress(t: float, sample: SampleRow) -> None:
         logging.getLogger("rbc.soak").info("%6.0f / %.0f s  RSS %s MiB  fds %s  p50 %s ms  p99 %s ms  (%d frames)",
-                                           t, config.duration_s, sample.rss_mib, sample.fds, sample.p50_ms,
-                                           sample.p99_ms, sample.frames)
+                                           t, config.duration_s, sample["rss_mib"], sample["fds"], sample["p50_ms"],
+                                           sample["p99_ms"], sample["frames"])
 
     try:
         result = Soak(url, server.pid, frames, config).run(progress)
