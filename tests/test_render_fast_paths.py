@@ -85,3 +85,60 @@ def test_a_frame_with_the_bridge_and_the_bonnet_is_deterministic():
     x, y, heading = track.point_at(track.project(float(centre[0]), float(centre[1])).s - 30.0)
     frames = [renderer.render(Pose(x, y, heading), light_intensity=light) for light in (1.0, 1.0, 0.5)]
     assert np.array_equal(frames[0], frames[1]) and not np.array_equal(frames[0], frames[2])
+
+
+def _light_ground_before(albedo, shadow, ambient, direct):
+    """``light_ground`` as it was: the full-size light, share and lit textures at once (300 MB more for the lake)."""
+    visible = 1.0 - shadow.astype(np.float32) / 255.0
+    light = ambient + direct * visible
+    share = direct * visible / light
+    h, w = albedo.shape
+    light8 = cv2.resize(np.clip(light * 128.0, 0, 255).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
+    share8 = cv2.resize(np.round(share * 255.0).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
+    lit = cv2.multiply(albedo.rgb, cv2.cvtColor(light8, cv2.COLOR_GRAY2RGB), scale=1.0 / 128.0)
+    rgba = cv2.cvtColor(lit, cv2.COLOR_RGB2RGBA)
+    cv2.mixChannels([share8], [rgba], [0, 3])
+    return rgba
+
+
+@pytest.mark.parametrize("band", [512, 96, 34])
+def test_the_ground_is_lit_band_by_band_into_the_same_bytes(monkeypatch, band):
+    """Was: the lake's world peaked at 760 MB while it was built, its full-size temporaries beside the texture."""
+    from tools.sim.render import world
+    from tools.sim.render.texture import GroundAlbedo
+
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 256, (1040, 360, 3), np.uint8)
+    shadow = cv2.GaussianBlur(rng.integers(0, 256, (520, 180), np.uint8), (0, 0), 1.2)
+    albedo = GroundAlbedo(rgb=rgb, x0=0.0, y1=0.0, res=0.05, mean_rgb=(90, 120, 60),
+                          water=np.zeros((130, 45), np.uint8))
+    monkeypatch.setattr(world, "LIGHT_BAND_ROWS", band)
+    lit = world.light_ground(albedo, shadow, world.AMBIENT, 0.55)
+    before = _light_ground_before(albedo, shadow, world.AMBIENT, 0.55)
+    assert np.array_equal(lit.mips[0], before)
+    assert all(np.array_equal(a, b) for a, b in zip(lit.mips[1:], [cv2.pyrDown(before)], strict=False))
+
+
+def test_upsampled_rows_are_the_rows_of_the_whole_resize():
+    from tools.sim.render.world import _upsampled_rows
+
+    low = np.random.default_rng(5).integers(0, 256, (37, 23), np.uint8)
+    whole = cv2.resize(low, (46, 74), interpolation=cv2.INTER_LINEAR)
+    for top, bottom in [(0, 74), (0, 2), (2, 8), (10, 40), (40, 74), (72, 74), (0, 10), (64, 74)]:
+        assert np.array_equal(_upsampled_rows(low, (46, 74), top, bottom), whole[top:bottom]), (top, bottom)
+    other = cv2.resize(low, (50, 81), interpolation=cv2.INTER_LINEAR)  # not twice the size: the whole resize
+    assert np.array_equal(_upsampled_rows(low, (50, 81), 7, 30), other[7:30])
+
+
+def test_the_grain_is_added_band_by_band_into_the_same_bytes():
+    from tools.sim.render.texture import add_grain
+
+    rng = np.random.default_rng(11)
+    img = rng.integers(0, 256, (1100, 700, 3), np.uint8)
+    tile = rng.integers(0, 65, (512, 512, 3), np.uint8)
+    for strength in (1.0, 0.6, 1.7):
+        whole = cv2.repeat(tile, 1100 // 512 + 1, 700 // 512 + 1)[:1100, :700]
+        expected = cv2.addWeighted(img, 1.0, whole, strength, -32.0 * strength)
+        banded = img.copy()
+        add_grain(banded, tile, strength)
+        assert np.array_equal(banded, expected), strength

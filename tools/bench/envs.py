@@ -1,8 +1,10 @@
 """``rbc env-bench``: steps per second of ``rbc/Drive-v0`` on one core, and where a step's time goes.
 
 The autopilot's action drives (``info["expert_action"]``), so the car stays on the road and the frames are the
-ones an agent sees. Figures are the best of N runs, as wall-clock and as CPU-time rates (the latter stays
-meaningful when other processes share the cores); OpenCV runs on the threads given (1: per-core figures).
+ones an agent sees. Figures are the best of N runs, as wall-clock and as CPU-time rates and CPU milliseconds per
+step (CPU time stays meaningful when other processes share the cores); OpenCV runs on the threads given (1:
+per-core figures). Each row runs in a fresh process (:func:`bench_env_isolated`), so its peak resident memory is
+one environment's: the interpreter, its imports and the world it builds.
 """
 
 from __future__ import annotations
@@ -10,8 +12,12 @@ from __future__ import annotations
 import cProfile
 import io
 import pstats
+import resource
+import sys
 import time
-from dataclasses import dataclass
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from multiprocessing import get_context
 from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
@@ -28,16 +34,24 @@ class EnvBenchResult:
     cpu_steps_per_s: float
     resets: int  # episodes that ended inside the measurement (each reset's cost is included)
     observation: str = "frame"
+    peak_rss_mb: float | None = None  # the measuring process's peak resident memory (None: not measured alone)
+
+    @property
+    def cpu_ms_per_step(self) -> float:
+        return 1000.0 / self.cpu_steps_per_s
 
     def row(self) -> str:
         wire = "JPEG round trip" if self.jpeg else "rendered frame"
         if self.observation == "model":
             wire = "64x64 model input"
+        peak = "-" if self.peak_rss_mb is None else f"{self.peak_rss_mb:,.0f}"
         return (f"{self.track:<12} {self.cameras} camera{'s' if self.cameras > 1 else ' '}  {wire:<16} "
-                f"{self.wall_steps_per_s:>8,.0f} {self.cpu_steps_per_s:>10,.0f}  {self.resets:>6}")
+                f"{self.wall_steps_per_s:>8,.0f} {self.cpu_steps_per_s:>10,.0f} {self.cpu_ms_per_step:>7.3f} "
+                f"{peak:>8}  {self.resets:>6}")
 
 
-HEADER = f"{'track':<12} {'cameras':<9} {'observation':<16} {'steps/s':>8} {'per CPU-s':>10}  {'resets':>6}"
+HEADER = (f"{'track':<12} {'cameras':<9} {'observation':<16} {'steps/s':>8} {'per CPU-s':>10} {'CPU ms':>7} "
+          f"{'peak MB':>8}  {'resets':>6}")
 
 
 def _drive(env, info: dict, steps: int) -> tuple[dict, int]:
@@ -51,13 +65,14 @@ def _drive(env, info: dict, steps: int) -> tuple[dict, int]:
 
 
 def bench_env(track: str, cameras: int = 1, jpeg: bool = True, steps: int = 2000, repeats: int = 3,
-              warmup: int = 200, seed: int = 0, observation: str = "frame") -> EnvBenchResult:
+              warmup: int = 200, seed: int = 0, observation: str = "frame", threads: int = 1) -> EnvBenchResult:
     """Steps per second of ``gymnasium.make("rbc/Drive-v0", track=track, ...)``: the best of ``repeats`` runs."""
     import gymnasium as gym
 
     import tools.envs  # noqa: F401  (registers rbc/Drive-v0)
 
-    env = gym.make("rbc/Drive-v0", track=track, cameras=cameras, jpeg=jpeg, observation=observation)
+    env = gym.make("rbc/Drive-v0", track=track, cameras=cameras, jpeg=jpeg, observation=observation,
+                   threads=threads)
     try:
         _, info = env.reset(seed=seed)
         info, _ = _drive(env, info, warmup)  # world textures, caches, first touches of memory
@@ -71,6 +86,28 @@ def bench_env(track: str, cameras: int = 1, jpeg: bool = True, steps: int = 2000
     finally:
         env.close()
     return EnvBenchResult(track, cameras, jpeg, steps, max(wall), max(cpu), resets, observation)
+
+
+def bench_env_isolated(track: str, cameras: int = 1, jpeg: bool = True, steps: int = 2000, repeats: int = 3,
+                       warmup: int = 200, seed: int = 0, observation: str = "frame",
+                       threads: int = 1) -> EnvBenchResult:
+    """:func:`bench_env` in a fresh (spawned) process, with that process's peak resident memory: one environment's
+    (the interpreter and its imports, the world it builds, the steps), not the worlds of the rows before."""
+    with ProcessPoolExecutor(1, mp_context=get_context("spawn")) as pool:
+        return pool.submit(_bench_env_measured, track, cameras, jpeg, steps, repeats, warmup, seed, observation,
+                           threads).result()
+
+
+def _bench_env_measured(track: str, cameras: int, jpeg: bool, steps: int, repeats: int, warmup: int, seed: int,
+                        observation: str, threads: int) -> EnvBenchResult:
+    result = bench_env(track, cameras, jpeg, steps, repeats, warmup, seed, observation, threads)
+    return replace(result, peak_rss_mb=peak_rss_mb())
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory, MB (``getrusage``: kilobytes on Linux, bytes on macOS)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 2**10
 
 
 @dataclass(frozen=True)

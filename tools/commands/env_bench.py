@@ -24,30 +24,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="steps between new worlds with --worlds (default 1: a new world every episode)")
     parser.add_argument("--profile", type=int, default=0, metavar="N",
                         help="also profile N steps on the first track (cProfile, by time of their own)")
+    parser.add_argument("--vector", type=int, default=0, metavar="N",
+                        help="also time an AsyncVectorEnv of N envs against one env on the first track: scaling, "
+                             "CPU ms per step of each process, workers' peak and shared memory (Linux)")
 
 
 def run(args: argparse.Namespace) -> int:
     if min(args.steps, args.repeats, args.threads, args.episode_steps, args.pool, args.new_world_steps) < 1 \
-            or args.profile < 0 or args.worlds < 0:
+            or args.profile < 0 or args.worlds < 0 or args.vector < 0:
         raise CommandError("--steps, --repeats, --threads, --episode-steps, --pool and --new-world-steps must be "
-                           ">= 1, --profile and --worlds >= 0")
+                           ">= 1, --profile, --worlds and --vector >= 0")
     try:
         import gymnasium  # noqa: F401
     except ModuleNotFoundError as exc:
         raise CommandError("rbc env-bench needs the package 'gymnasium'", 'pip install -e ".[gym]"') from exc
     import cv2
 
-    from tools.bench.envs import HEADER, WORLDS_HEADER, bench_env, bench_worlds, profile_env
+    from tools.bench.envs import HEADER, WORLDS_HEADER, bench_env_isolated, bench_worlds, profile_env
 
     cv2.setNumThreads(args.threads)
     print(f"rbc env-bench: rbc/Drive-v0, autopilot driving, OpenCV threads {args.threads}, "
-          f"best of {args.repeats} x {args.steps} steps")
+          f"best of {args.repeats} x {args.steps} steps; each row in a process of its own (peak MB: its peak "
+          f"resident memory)")
     print(HEADER)
     for track in args.tracks:
         for cameras, jpeg, observation in ((1, True, "frame"), (1, False, "frame"), (3, True, "frame"),
                                            (1, True, "model")):
-            print(bench_env(track, cameras, jpeg, args.steps, args.repeats, observation=observation).row(),
-                  flush=True)
+            print(bench_env_isolated(track, cameras, jpeg, args.steps, args.repeats, observation=observation,
+                                     threads=args.threads).row(), flush=True)
     if args.worlds:
         every = "every episode" if args.new_world_steps == 1 else f"after every {args.new_world_steps:,} steps"
         print(f"\nseconds per episode of {args.episode_steps} steps from a random spawn, {args.worlds} episodes, "
@@ -58,6 +62,13 @@ def run(args: argparse.Namespace) -> int:
         print(base.row())
         for result in others:
             print(result.row(base), flush=True)
+    if args.vector:
+        from tools.bench.env_vector import bench_vector
+
+        print(f"\nAsyncVectorEnv of {args.vector} on {args.tracks[0]} (one camera, JPEG round trip), "
+              f"{args.steps} steps, against one env (each env: OpenCV threads 1):")
+        for line in bench_vector(args.tracks[0], args.vector, args.steps).lines():
+            print(line, flush=True)
     if args.profile:
         print(f"\ncProfile of {args.profile} steps on {args.tracks[0]} (one camera, JPEG round trip):")
         print(profile_env(args.tracks[0], args.profile))

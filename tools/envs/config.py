@@ -130,6 +130,10 @@ class DriveEnvConfig:
     # fields or an .onnx model file (its contract)
     contract: PreprocessContract | None = None
     speed: bool = False  # True: a Dict observation of the camera(s) and "speed" (km/h, as the telemetry says)
+    # OpenCV's threads in the env's process (cv2.setNumThreads, for the whole process), set when the env is made:
+    # 1 (a 320x160 frame is too small for threads to pay, and a vector env's processes would fight over the
+    # cores with them), or None to leave OpenCV's setting as it is
+    threads: int | None = 1
 
     def __post_init__(self) -> None:
         _choice("camera", self.camera, tuple(RIGS))
@@ -163,6 +167,9 @@ class DriveEnvConfig:
         _choice("observation", self.observation, OBSERVATIONS)
         if not isinstance(self.speed, bool):
             raise BadValue(f"speed must be True or False, got {self.speed!r}")
+        if self.threads is not None and (not isinstance(self.threads, int) or isinstance(self.threads, bool)
+                                         or self.threads < 1):
+            raise BadValue(f"threads must be an integer >= 1 or None, got {self.threads!r}")
         if self.worlds is not None and (self.track is not None or self.world_seed is not None):
             raise BadValue("give track/world_seed or worlds, not both",
                            "worlds draws the world of every episode; tracks=('lake',) puts a built-in one in the draw")

@@ -13,6 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import cv2
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -73,6 +74,8 @@ class DriveEnv(gym.Env):
                            "gymnasium.make('rbc/Drive-v0', render_mode='human') shows the frames in a window")
         self.render_mode = render_mode
         self.config = config = config_from_kwargs(kwargs)
+        if config.threads is not None:
+            cv2.setNumThreads(config.threads)
         self.metadata = {**self.metadata, "render_fps": config.control_hz}
         self.law = config.law
         assert config.contract is not None  # DriveEnvConfig always sets one
@@ -86,6 +89,8 @@ class DriveEnv(gym.Env):
             vehicle=config.vehicle, speed_limit_kmh=config.law.speed_limit_kmh, control_hz=config.control_hz,
             max_lap_time_s=config.max_lap_time_s, light_intensity=config.light_intensity, cones=config.cones,
             reverse=config.reverse)
+        if config.worlds is None:  # built now, not at the first reset: the workers a fork-started vector env
+            self.client.prepare()  # starts after making its first env in the parent share it (read-only pages)
         self._pending: deque[SteerCommand] = deque()
         self._steps = 0
         self._frame: np.ndarray | None = None  # the centre camera as rendered, for render()

@@ -13,8 +13,6 @@ from typing import Any
 import numpy as np
 
 from drive_server.serving.control import ControlLaw
-from drive_server.serving.model import InferenceConfig, SteeringModel
-from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 from drive_server.serving.smoothing import SteeringSmoother
 from protocol import SpeedUnit
 from protocol.errors import BadValue
@@ -36,6 +34,10 @@ class OnnxPolicy:
                  law: ControlLaw | None = None, gain: float | None = None) -> None:
         if control not in CONTROLS:
             raise BadValue(f"control must be one of {', '.join(CONTROLS)}, got {control!r}")
+        # here, not at the top: importing rbc/Drive-v0 does not load onnxruntime (about 20 MB in every process)
+        from drive_server.serving.model import InferenceConfig, SteeringModel
+        from drive_server.serving.pipeline import DriveConfig, DrivePipeline
+
         model = SteeringModel(Path(path), InferenceConfig(threads=threads))
         model.warm_up()
         self.control = control

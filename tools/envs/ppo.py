@@ -95,6 +95,8 @@ def train_ppo(recipe: PPORecipe, out: str | Path, progress: bool = False) -> Pat
     def make() -> gym.Env[Observation, np.ndarray]:
         return gym.make("rbc/Drive-v0", **kwargs)
 
+    if recipe.envs > 1 and recipe.worlds is None:
+        make().close()  # the track's world built here, once: the forked workers share it (read-only pages)
     envs = SubprocVecEnv([make] * recipe.envs, start_method="fork") if recipe.envs > 1 else DummyVecEnv([make])
     vec = VecMonitor(envs, str(out / "monitor.csv"))
     vec.seed(recipe.seed)

@@ -11,6 +11,7 @@ timing: timing changes when a world is built, not which.
 from __future__ import annotations
 
 import copy
+import ctypes
 import os
 import tempfile
 import threading
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from tools.sim.render.world import World
+    from tools.sim.track.road import Track
 
 #: one build at a time in a process: the renderer's own albedo and prop caches are not thread-safe
 _BUILD_LOCK = threading.Lock()
@@ -88,7 +90,37 @@ def build_world(key: WorldKey) -> BuiltWorld:
     with _BUILD_LOCK:
         track = get_track(path)
         cones = place_cones(track, key.cones, key.cone_seed) if key.cones else None
-        return BuiltWorld(path, World(track, key.sun_deg, cones))
+        built = BuiltWorld(path, World(track, key.sun_deg, cones))
+        if not key.cones:
+            _forget_albedo(track)
+        return built
+
+
+def release_albedo(track: Track) -> None:
+    """Drop the ground albedo the renderer cached while building ``track``'s world (128 MB for the lake; the built
+    world keeps only its lit texture). Done after every world built without cones: with cones each layout is a
+    world of its own, painted on the same albedo, so it stays; another sun for a track paints it again (about a
+    second, once per world built)."""
+    with _BUILD_LOCK:
+        _forget_albedo(track)
+
+
+def _forget_albedo(track: Track) -> None:
+    from tools.sim.render.world import forget_albedo
+
+    if forget_albedo(track):
+        _trim_heap()
+
+
+def _trim_heap() -> None:
+    """Give the C heap's free memory back to the system (glibc; elsewhere nothing). A world's build frees hundreds
+    of MB of temporaries below glibc's raised mmap threshold, which stay in the process (57 MB of the lake's)."""
+    try:
+        libc = ctypes.CDLL(None)
+        trim = libc.malloc_trim
+    except (OSError, AttributeError):
+        return
+    trim(0)
 
 
 def with_fog(world: World, factor: float) -> World:

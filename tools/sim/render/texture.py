@@ -126,9 +126,20 @@ def paint_ground(track: Track, seed: int | None = None) -> GroundAlbedo:
     # 4. fine grain everywhere (a tiled noise patch; the large-scale colour hides the 25 m period)
     tile = (rng.standard_normal((512, 512, 1)) * 7 + rng.standard_normal((512, 512, 3)) * 3
             + cv2.resize(rng.standard_normal((128, 128)).astype(np.float32), (512, 512))[..., None] * 5)
-    tile = np.clip(tile + 32, 0, 64).astype(np.uint8)
-    grain = cv2.repeat(tile, h // 512 + 1, w // 512 + 1)[:h, :w]
-    img = cv2.addWeighted(img, 1.0, grain, look.grain, -32.0 * look.grain)
+    add_grain(img, np.clip(tile + 32, 0, 64).astype(np.uint8), look.grain)
     red, green, blue = (int(v) for v in np.clip(mean, 0, 255))
     return GroundAlbedo(rgb=img, x0=x0, y1=y1, res=res, mean_rgb=(red, green, blue), water=water)
 
+
+def add_grain(img: np.ndarray, tile: np.ndarray, strength: float) -> None:
+    """In place: ``img + strength * (grain - 32)``, the grain ``tile`` repeated over the image, saturated to uint8.
+
+    A band of the tile's height at a time: the same pixels as one ``cv2.addWeighted`` with the whole repeated
+    grain, without two more textures in memory at once (a lake's albedo is 128 MB). Each band is added into a new
+    array and copied back: OpenCV's in-place ``dst=`` rounds some row ends differently."""
+    h, w = img.shape[:2]
+    rows = tile.shape[0]
+    grain = cv2.repeat(tile, 1, w // tile.shape[1] + 1)[:, :w]
+    for top in range(0, h, rows):
+        band = img[top:top + rows]
+        band[...] = cv2.addWeighted(band, 1.0, grain[:len(band)], strength, -32.0 * strength)

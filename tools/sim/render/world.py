@@ -36,6 +36,7 @@ MIN_SUN_ELEVATION = 2.0  # degrees; the sun is clamped here rather than set belo
 SHADOW_DOWNSCALE = 2  # the shadow map has 2x coarser texels than the albedo (shadows are soft anyway)
 SHADOW_BLUR = 1.2  # penumbra, in shadow-map texels
 MIP_LEVELS = 7  # level L has texels 2**L times the base size
+LIGHT_BAND_ROWS = 512  # the full-size texture is lit this many rows at a time (light_ground)
 ALBEDO_CACHE, PROPS_CACHE, WORLD_CACHE = 2, 4, 3  # LRU sizes (a lake world holds ~0.35 GB)
 
 
@@ -153,6 +154,12 @@ def get_world(track: Track, light_direction_deg: float = 0.0, cones: np.ndarray 
     return _lru(_world_cache, key, WORLD_CACHE, lambda: World(track, light_direction_deg, cones))
 
 
+def forget_albedo(track: Track) -> bool:
+    """Drop ``track``'s ground albedo from the cache (128 MB for the lake; False: it held none): the worlds built
+    keep their lit textures; building the track for another sun or cones paints it again (a second or less)."""
+    return _albedo_cache.pop(track.digest, None) is not None
+
+
 def clear_caches() -> None:
     """Drop every cached albedo, prop set and world (frees their memory)."""
     _albedo_cache.clear()
@@ -172,23 +179,46 @@ def _shadow_map(albedo: GroundAlbedo, props: Props, sun: Sun) -> np.ndarray:
 
 
 def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direct: float) -> LitGround:
-    """Multiply the albedo by the light map and stack the direct-light share as alpha; build mips."""
+    """Multiply the albedo by the light map and stack the direct-light share as alpha; build mips.
+
+    The full-size texture is made LIGHT_BAND_ROWS rows at a time, each band from the shadow rows it reads: the
+    same bytes as whole-texture operations (every step is per texel, the 2x bilinear upsampling per pair of
+    rows), with about a fifth of the memory at once (a lake's texture is 170 MB; its full-size light, share and
+    lit temporaries were 300 MB more)."""
     visible = 1.0 - shadow.astype(np.float32) / 255.0
     light = ambient + direct * visible
     share = direct * visible / light
+    light_low = np.clip(light * 128.0, 0, 255).astype(np.uint8)
+    share_low = np.round(share * 255.0).astype(np.uint8)
+    del visible, light, share
     h, w = albedo.shape
-    light8 = cv2.resize(np.clip(light * 128.0, 0, 255).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
-    share8 = cv2.resize(np.round(share * 255.0).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
-    lit = cv2.multiply(albedo.rgb, cv2.cvtColor(light8, cv2.COLOR_GRAY2RGB), scale=1.0 / 128.0)
-    rgba = cv2.cvtColor(lit, cv2.COLOR_RGB2RGBA)
-    cv2.mixChannels([share8], [rgba], [0, 3])
-    mips = [rgba]
+    rgba = np.empty((h, w, 4), np.uint8)
+    for top in range(0, h, LIGHT_BAND_ROWS):
+        bottom = min(h, top + LIGHT_BAND_ROWS)
+        light8, share8 = (_upsampled_rows(low, (w, h), top, bottom) for low in (light_low, share_low))
+        lit = cv2.multiply(albedo.rgb[top:bottom], cv2.cvtColor(light8, cv2.COLOR_GRAY2RGB), scale=1.0 / 128.0)
+        band = rgba[top:bottom]
+        cv2.cvtColor(lit, cv2.COLOR_RGB2RGBA, dst=band)
+        band[..., 3] = share8
+    mips: list[np.ndarray] = [rgba]
     for _ in range(MIP_LEVELS - 1):
         mips.append(cv2.pyrDown(mips[-1]))
     bright = ambient + direct
     red, green, blue = (int(min(255, round(c * bright))) for c in albedo.mean_rgb)
     border = (red, green, blue, int(round(255 * direct / bright)))
     return LitGround(mips=tuple(mips), x0=albedo.x0, y1=albedo.y1, res=albedo.res, border=border)
+
+
+def _upsampled_rows(low: np.ndarray, size: tuple[int, int], top: int, bottom: int) -> np.ndarray:
+    """Rows ``top:bottom`` of ``cv2.resize(low, size)`` (bilinear). At exactly twice the size (the shadow map's
+    case) from the source rows they read, one more on each side: bilinear weights repeat every two rows, so the
+    rows are the same bytes as the whole resize's; any other size resizes the whole image."""
+    w, h = size
+    if (2 * low.shape[0], 2 * low.shape[1]) != (h, w) or top % 2 or (bottom % 2 and bottom != h):
+        return cv2.resize(low, size, interpolation=cv2.INTER_LINEAR)[top:bottom]
+    first, end = max(0, top // 2 - 1), min(low.shape[0], bottom // 2 + 1)
+    rows = cv2.resize(low[first:end], (w, 2 * (end - first)), interpolation=cv2.INTER_LINEAR)
+    return rows[top - 2 * first:bottom - 2 * first]
 
 
 def _prop_visibility(props: Props, shadow: np.ndarray, albedo: GroundAlbedo, sun: Sun) -> dict[str, np.ndarray]:
