@@ -16,9 +16,9 @@ import pytest
 from tests.test_docs_layout import user_pages
 
 REPO = Path(__file__).resolve().parents[1]
-#: TEMPORARY (#55): pages whose wording other people are rewriting. Remove a page once it passes; the last test
-#: fails while a page listed here already passes, so the list only shrinks.
-OTHERS_RENAMING = {"docs/recordings.md", "docs/results.md"}
+#: Pages whose wording is being rewritten elsewhere (none now). The last test fails while a page listed here already
+#: passes, so the list only shrinks.
+OTHERS_RENAMING: set[str] = set()
 #: Words the glossary replaced, and the one it uses (outside code, where JSON keys and formulas keep eta).
 RETIRED = {
     r"\bbehavioural\b": "behavioral",
@@ -73,6 +73,35 @@ def test_the_check_finds_a_retired_word_and_spares_code():
 def test_a_page_uses_the_glossarys_names(page):
     found = retired_words(page)
     assert not found, "\n".join(found)
+
+
+def table_header_words(record: Path) -> list[str]:
+    """Retired words in the column headers of a results record's tables (the pages' generated tables; their cells
+    keep the paper's notation, e.g. Table 9's η = ...)."""
+    import json
+
+    found = []
+    for name, table in (json.loads(record.read_text(encoding="utf-8")).get("tables") or {}).items():
+        for column in table.get("columns", []):
+            header = str(column[0])
+            hits = [better for pattern, better in RETIRED.items() if re.search(pattern, header, flags=re.I)]
+            found += [f"{record.name} {name}: {header!r} (say {better!r})" for better in hits]
+    return found
+
+
+def test_the_generated_tables_use_the_glossarys_names_too():
+    """Was: Results' tables said "ceiling" and "r to mean", DAgger's "lake η", where the prose said r9, r to intent
+    and degree of autonomy (the prose check leaves the generated tables out)."""
+    found = [hit for record in sorted((REPO / "results").glob("*.json")) for hit in table_header_words(record)]
+    assert not found, "\n".join(found)
+
+
+def test_the_header_check_finds_a_retired_header(tmp_path):
+    record = tmp_path / "x.json"
+    record.write_text('{"tables": {"t": {"columns": [["ceiling", "{a}"], ["r9", "{b}"], ["lake η", "{c}"]]}}}',
+                      encoding="utf-8")
+    assert table_header_words(record) == ["x.json t: 'ceiling' (say 'r9')",
+                                          "x.json t: 'lake η' (say 'degree of autonomy')"]
 
 
 def test_the_pages_being_renamed_elsewhere_still_need_it():
