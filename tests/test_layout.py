@@ -27,16 +27,17 @@ STDLIB = sys.stdlib_module_names
 SAMPLE = REPO / "tests" / "data" / "udacity-sample"
 
 
-def _modules() -> dict[str, Path]:
+def our_modules(root: Path = REPO) -> dict[str, Path]:
+    """``dotted.name: path`` of every module of the four packages under ``root``."""
     out = {}
     for package in OURS:
-        for path in sorted((REPO / package).rglob("*.py")):
-            parts = path.relative_to(REPO).with_suffix("").parts
+        for path in sorted((root / package).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
             out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
     return out
 
 
-MODULES = _modules()
+MODULES = our_modules()
 
 
 def _imports(path: Path) -> set[str]:
