@@ -112,3 +112,18 @@ def test_runs_of_another_model_file_are_refused_in_one_line(tmp_path: Path, caps
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("study: error: train-noise0.3-0 was driven by a copy of a model file 0123456789abcdef")
     assert not (tmp_path / "o.json").exists()
+
+
+def test_the_ensemble_monitors_own_score_is_a_candidate_with_two_members_or_more() -> None:
+    from tools.monitoreval.candidates import Served, candidates, window_scores
+
+    n = 30
+    served = Served(np.full(n, 0.3), None, np.zeros(n), [])
+    one = {"a": np.full(n, 0.1)}
+    two = {"a": np.full(n, 0.1), "b": np.full(n, 0.3)}
+    frame = {"autoencoder": np.zeros(n), "reference": served, "served": served}
+    assert "ensemble_monitor" not in window_scores({**frame, "others": one})
+    assert "ensemble_monitor" not in {c.key for c in candidates(["a"], False, 0, 0.1)}
+    # |0.3 - mean(0.1, 0.3)| + std(0.1, 0.3) = 0.1 + 0.1, as rbc monitor fit --score ensemble scores a frame
+    assert np.allclose(window_scores({**frame, "others": two})["ensemble_monitor"], 0.2)
+    assert "ensemble_monitor" in {c.key for c in candidates(["a", "b"], False, 0, 0.1)}

@@ -19,6 +19,7 @@ import numpy as np
 
 from drive_server.serving.monitor import FRAMES_PER_SECOND
 from models.monitoring.calibrate import window_means
+from models.monitoring.ensemble import ensemble_scores
 from models.monitoring.failures import FailureRun
 from protocol.errors import BadValue
 from tools.monitoreval.runner import degraded_model, file_digest
@@ -52,6 +53,9 @@ def candidates(others: Sequence[str], halves: bool, members: int, sigma: float) 
     out += [Candidate(f"vs_{name}", "c", f"|served - {name}.onnx|") for name in others]
     if others:
         out.append(Candidate("ensemble", "d", f"std of the reference and {', '.join(others)}"))
+    if len(others) >= 2:
+        out.append(Candidate("ensemble_monitor", "d", "|served - mean of the others| + their std "
+                                                      "(rbc monitor fit --score ensemble)"))
     if halves:
         out.append(Candidate("mirror", "d", "std of the served model's two mirrored halves"))
     if members:
@@ -164,6 +168,8 @@ def window_scores(frame: dict[str, Any], window: int = FRAMES_PER_SECOND) -> dic
         out[f"vs_{name}"] = mean(np.abs(served.steer - steer))
     if others:
         out["ensemble"] = mean(np.std(np.stack([ref.steer, *others.values()]), axis=0))
+    if len(others) >= 2:
+        out["ensemble_monitor"] = mean(ensemble_scores(served.steer, np.stack(list(others.values()))))
     if served.halves is not None:
         out["mirror"] = mean(np.abs(served.halves[0] + served.halves[1]) / 2.0)  # std of a and -b
     if served.members:
