@@ -126,4 +126,7 @@ def test_the_ensemble_monitors_own_score_is_a_candidate_with_two_members_or_more
     assert "ensemble_monitor" not in {c.key for c in candidates(["a"], False, 0, 0.1)}
     # |0.3 - mean(0.1, 0.3)| + std(0.1, 0.3) = 0.1 + 0.1, as rbc monitor fit --score ensemble scores a frame
     assert np.allclose(window_scores({**frame, "others": two})["ensemble_monitor"], 0.2)
-    assert "ensemble_monitor" in {c.key for c in candidates(["a", "b"], False, 0, 0.1)}
+    assert {"ensemble_monitor", "ensemble_spread"} <= {c.key for c in candidates(["a", "b"], False, 0, 0.1)}
+    steering = np.where(np.arange(n) % 2 == 0, 0.2, 0.4)  # the served steering swings by 0.1 around 0.3
+    swinging = window_scores({**frame, "served": Served(steering, None, np.zeros(n), []), "others": two})
+    assert np.allclose(swinging["ensemble_spread"][15:], swinging["ensemble_monitor"][15:] + 0.1, atol=1e-3)

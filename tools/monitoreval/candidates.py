@@ -56,6 +56,8 @@ def candidates(others: Sequence[str], halves: bool, members: int, sigma: float) 
     if len(others) >= 2:
         out.append(Candidate("ensemble_monitor", "d", "|served - mean of the others| + their std "
                                                       "(rbc monitor fit --score ensemble)"))
+        out.append(Candidate("ensemble_spread", "d", "the ensemble monitor's score + the served steering's std over "
+                                                     "1 s (both in steering units, unweighted)"))
     if halves:
         out.append(Candidate("mirror", "d", "std of the served model's two mirrored halves"))
     if members:
@@ -170,6 +172,7 @@ def window_scores(frame: dict[str, Any], window: int = FRAMES_PER_SECOND) -> dic
         out["ensemble"] = mean(np.std(np.stack([ref.steer, *others.values()]), axis=0))
     if len(others) >= 2:
         out["ensemble_monitor"] = mean(ensemble_scores(served.steer, np.stack(list(others.values()))))
+        out["ensemble_spread"] = out["ensemble_monitor"] + out["served_std"]
     if served.halves is not None:
         out["mirror"] = mean(np.abs(served.halves[0] + served.halves[1]) / 2.0)  # std of a and -b
     if served.members:
