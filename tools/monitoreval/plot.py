@@ -11,6 +11,9 @@ import numpy as np
 from tools.monitoreval.scoring import DEFAULT_RULES, ScoringRules, first_warning_leads
 from tools.monitoreval.summary import run_trace
 
+#: How much of the time axis a take-over's label takes: a closer one is put a row lower.
+LABEL_WIDTH = 0.085
+
 if TYPE_CHECKING:
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.scenario import RunResult
@@ -42,10 +45,15 @@ def plot_run(driver: OnnxDriver, result: RunResult, path: Path, title: str = "",
     for lap in result.laps:  # every take-over, faintly (those right after another are not failures of their own)
         for intervention in lap.interventions:
             ax.axvline(intervention.t, color="grey", lw=0.6, alpha=0.6)
+    span = float(t.max() - t.min()) if t.size else 1.0
+    placed: list[float] = []  # the latest label's time in each row: a label too close to one drops a row
     for when, cause, lead in first_warning_leads(run_trace(driver, result), rules):
         ax.axvline(when, color="black", lw=1.3)
-        label = f"{cause.replace('_', ' ')}" + (f"\nforeseen {lead:.1f} s ahead" if lead is not None else "\nmissed")
-        ax.annotate(label, (when, top), xytext=(3, -2), textcoords="offset points", fontsize=7, va="top")
+        label = f"{cause.replace('_', ' ')}" + (f"\n{lead:.1f} s ahead" if lead is not None else "\nmissed")
+        row = next((k for k, last in enumerate(placed) if when - last > LABEL_WIDTH * span), len(placed))
+        placed[row:row + 1] = [when]
+        ax.annotate(label, (when, top), xytext=(3, -2 - 20 * (row % 3)), textcoords="offset points", fontsize=7,
+                    va="top", bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
         if lead is not None:
             ax.annotate("", xy=(when, spec.alarm), xytext=(when - lead, spec.alarm),
                         arrowprops={"arrowstyle": "<->", "color": "black", "lw": 1})
