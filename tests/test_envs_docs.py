@@ -22,7 +22,8 @@ PAGE = REPO / "docs" / "python.md"
 BLOCK = re.compile(r"^```(\w*)\n(.*?)^```\n", re.S | re.M)
 HEADING = re.compile(r"^#{2,3} (.+)$", re.M)
 #: examples that need more than the gym extra
-NEEDS = {"stable_baselines3": "the rl extra (pip install -e '.[rl]')", "torch": "the train extra"}
+NEEDS = {"stable_baselines3": "the rl extra (pip install -e '.[rl]')", "torch": "the train extra",
+         "imitation": "imitation (pip install -r requirements-imitation.txt && pip install --no-deps imitation==1.0.1)"}
 
 
 def examples(page: Path = PAGE) -> list[tuple[str, str, str | None]]:

@@ -43,7 +43,8 @@ def test_the_sdist_holds_what_its_tests_and_readme_need(tmp_path):
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     needed = {"tests/conftest.py", "tests/helpers_server.py", "tests/data/udacity-sample/driving_log.csv",
               "tests/js/drive_client.js", "docs/img/demo_map.png", "docs/img/sim_sheet.jpg", "LICENSE", "README.md",
-              "models/pretrained/simplistic.onnx", "tools/sim/track/builtin/lake.json", "pyproject.toml"}
+              "models/pretrained/simplistic.onnx", "tools/sim/track/builtin/lake.json", "pyproject.toml",
+              ".ci/run", "requirements-imitation.txt"}
     assert needed <= names, sorted(needed - names)
     readme_images = {line.split("](", 1)[1].split(")", 1)[0] for line in (REPO / "README.md").read_text().splitlines()
                      if line.startswith("![")}

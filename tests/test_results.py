@@ -193,6 +193,8 @@ def test_the_readme_is_a_front_door():
     assert f'pip install -e ".[{extras}]"' in commands[1]
     torch = re.search(r"pip install -q (torch==[\d.]+)", "\n".join(ci)).group(1)
     assert f"pip install {torch}" in commands[1]
+    imitation = re.search(r"pip install -q --no-deps (imitation==[\d.]+)", "\n".join(ci)).group(1)
+    assert f"pip install -r requirements-imitation.txt && pip install --no-deps {imitation}" in commands[1]
     assert len(readme.splitlines()) < 80
     # one small table, generated from the records, of how well the default model drives each track
     tables = _tables(readme)

@@ -17,7 +17,9 @@ the newest on the package index):
   and pins ``gymnasium~=0.29`` and ``stable-baselines3~=2.2.1``: it would downgrade gymnasium 1.4.0 to 0.29.1 and
   SB3 2.9.2 to 2.2.1 (torch 2.13.0 stays). ``rbc/Drive-v0`` is written for gymnasium >= 1.0 (the ``gym`` extra;
   ``gym.make_vec``, which its tests use, came with 1.0), and the rest (sacred, optuna, datasets,
-  pyarrow, tensorboard, pygame, ...) is weight for a loop this small.
+  pyarrow, tensorboard, pygame, ...) is weight for a loop this small. Installed without its dependencies
+  (requirements-imitation.txt), its BC and SimpleDAgger do run on ``rbc/Drive-v0``
+  (tests/test_envs_imitation.py), with datasets and pyarrow still in tow for DAgger's saved rounds.
 * Its learner is not ours. ``imitation.algorithms.bc.BC`` fits an SB3 ``ActorCriticPolicy`` (its own CNN, a
   Gaussian's log-likelihood) on raw observations. Our learner is the paper's network trained by ``rbc train``:
   zero-steer balancing, the augmentations, the crop and resize of its preprocessing contract, and an ONNX export
