@@ -35,6 +35,7 @@ def test_a_lake_recording_is_scored_open_and_closed_loop() -> None:
     assert -1 <= s.r_to_intent <= 1 and s.r_to_intent != s.pearson_r and 0 < s.intent_r < 1
     assert s.eta is not None and 0 <= s.eta <= 100 and s.interventions >= 0 and s.seconds_per_takeover > 0
     assert s.off_road_s is not None and s.off_road_s >= 0 and "off_road_s" in s.as_dict()  # as drive-log's JSON
+    assert s.reversing_s == 0 and "reversing_s" in s.as_dict()  # the sample's driver never reverses
     # issue 43: the jungle and the mountain are driven too, their road found by the manifest's track's profile
     jungle = score_recording(_rec(track="jungle"), DATA, MODEL)
     assert jungle.eta is not None and jungle.off_road_s is not None and jungle.mse == s.mse

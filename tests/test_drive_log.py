@@ -207,11 +207,12 @@ def test_drive_log_crossval_and_the_road_go_through_one_assembly(tmp_path: Path,
     out = tmp_path / "r.json"
     assert main(["drive-log", "--data", str(data), "--model", str(model), "--json", str(out),
                  "--strip", str(tmp_path / "s.jpg"), "--plot", str(tmp_path / "p.png")]) == 0
-    eta, takeovers, _, off_road = _closed_loop(data, model, None, None)
+    eta, takeovers, _, off_road, reversed_s = _closed_loop(data, model, None, None)
     assert main(["data", "road", str(data)]) == 0
     assert calls == ["drive", "road", "drive", "road", "road"]
     record = json.loads(out.read_text())
-    assert (record["eta"], record["interventions"], record["off_road_s"]) == (eta, takeovers, off_road)
+    assert (record["eta"], record["interventions"], record["off_road_s"], record["reversing_s"]) == (
+        eta, takeovers, off_road, reversed_s)
 
 
 def test_only_the_chosen_rows_are_driven_each_stretch_from_the_recorded_path(tmp_path: Path) -> None:

@@ -133,6 +133,9 @@ def _drive(args: argparse.Namespace, samples: list) -> int:
     if result.off_road_s:
         print(f"the recorded driver was off the road for {result.off_road_s:.1f} s of the log: the person drove "
               "there (pink), not counted")
+    if result.reversing_s:
+        print(f"the recorded driver reversed for {result.reversing_s:.1f} s of the log (turning round, backing "
+              "away): the person drove there (pink), not counted")
     title = f"{name} on {Path(args.data).name}: eta {result.eta:.1f} %, {result.interventions} take-overs"
     print(f"strip {write_strip(result, args.strip)}")
     print(f"plot  {write_offset_plot(result, args.plot, title)}")

@@ -16,7 +16,11 @@ an interference takes 6 s), then hands back. DAVE-2's simulator handed back at o
 a spot the model cannot drive (the bridge, a faded edge line) was charged 6 s again every few frames, for
 what a person beside the car meets as one take-over. Where the recorded driver left the road (onto the
 dirt: :attr:`RoadEdges.off_road`) there is no road to keep to: the person drives the recorded path there,
-and that time is neither the driver's nor counted (``LoopResult.off_road_s``).
+and that time is neither the driver's nor counted (``LoopResult.off_road_s``). Where the recorded driver
+reversed (:func:`tools.drivelog.path.reversing`: turning round at a road's end, backing away from a wall, the
+back-and-forth of a three-point turn) the recorded path is not one a car driving forward can follow: with
+``LoopRules.person_reverses`` the person drives the recorded path there, and the leg forwards at full lock
+that completes the turn, and hands back on it; that time is not counted either (``LoopResult.reversing_s``).
 
 The view is re-projected from the nearest of the three recorded cameras: the left and right ones are real
 views 0.95 m to each side, so a car up to about 1.4 m off the driver's line is never shown a view moved
@@ -37,7 +41,7 @@ from protocol.errors import BadValue
 from protocol.facts import DEPLOY_SPEED_KMH
 from protocol.jpeg import read_jpeg_file
 from tools.drivelog.camera import DEFAULT_CAMERA, UnityCamera, ViewSynthesizer
-from tools.drivelog.path import WHEELBASE_M, RecordedDrive, advance, curvature
+from tools.drivelog.path import WHEELBASE_M, RecordedDrive, advance, curvature, reversing
 from tools.drivelog.road import RoadEdges
 from tools.sim.driving.rules import Rules, degree_of_autonomy
 
@@ -76,6 +80,9 @@ class LoopRules:
     # after a take-over the person drives the recorded path this long (s of the log) before handing back: the
     # time Eq. 2 charges for it (0: at once, as DAVE-2's simulator; the measure before December 2026)
     handback_s: float = Rules.seconds_per_intervention
+    # where the recorded driver reversed (tools.drivelog.path.reversing) the person drives the recorded path, and
+    # that time is not counted (False: the driver is asked to follow it forwards, the measure before #52)
+    person_reverses: bool = True
 
     def __post_init__(self) -> None:
         """The one check of the rules, whichever command (``rbc drive-log``, ``rbc data crossval``) made them."""
@@ -130,6 +137,7 @@ class LoopResult:
     person: np.ndarray | None = None  # (steps,) True where a person drove after a take-over (rules.handback_s)
     # per take-over, the car's views in the seconds before it, oldest first (``drive``'s ``history_s``)
     before_takeovers: list[list[Snapshot]] = field(default_factory=list)
+    reversing_s: float = 0.0  # log time where the recorded driver reversed: driven by the person, not counted
 
     @property
     def interventions(self) -> int:
@@ -201,9 +209,11 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
     # the recorded path there, and that time is neither the driver's nor counted
     off_road = road.off_road if rules.lane == "road" and road is not None and road.off_road is not None \
         else np.zeros(n, bool)
+    # where the recorded driver reversed, the recorded path is not one to follow forwards: the person drives it
+    backwards = reversing(drive_log) if rules.person_reverses else np.zeros(n, bool)
     # the ground's pitch in each frame where the road finder measured it (hills: tools.drivelog.pitch)
     pitch = road.pitch_deg if road is not None else None
-    moving_time = off_road_time = 0.0
+    moving_time = off_road_time = reversing_time = 0.0
     for session in np.unique(drive_log.session):
         steps = drive_log.session_range(int(session))
         arc = drive_log.arc[steps.start:steps.stop]
@@ -218,9 +228,9 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
                 break
             v, dt = min(drive_log.speed[i], cap), drive_log.dt[i]
             clock += dt
-            # after a take-over, and where the recorded driver was off the road: the recorded path, the driver
-            # is not asked
-            by_person = clock <= person_until or bool(off_road[i])
+            # after a take-over, where the recorded driver was off the road or reversed: the recorded path, the
+            # driver is not asked
+            by_person = clock <= person_until or bool(off_road[i]) or bool(backwards[i])
             view = None if by_person else _view(synth, drive_log, i, e, psi, s - drive_log.arc[i], rules, camera,
                                                 None if pitch is None else float(pitch[i]))
             delta = float(drive_log.steering[i]) if view is None else float(driver(view, i))
@@ -231,10 +241,14 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             person.append(by_person)
             if v >= MOVING_MPS and off_road[i]:
                 off_road_time += dt
+            elif v >= MOVING_MPS and backwards[i]:
+                reversing_time += dt
             elif v >= MOVING_MPS:
                 moving_time += dt
             k_car = k_path[i] if by_person else curvature(delta, rules.wheelbase_m)
             s, e, psi = advance(s, e, psi, v, dt, float(k_car), float(k_path[i]))
+            if backwards[i] and not off_road[i]:
+                e, psi = 0.0, 0.0  # the person drives the recorded path, and hands back on it
             over = not frame_limits[i, 0] <= e <= frame_limits[i, 1]
             fresh = i != last and i in keep
             if history_s > 0 and view is not None:
@@ -257,4 +271,4 @@ def drive(drive_log: RecordedDrive, driver: Driver, rules: LoopRules = LoopRules
             last = i
     return LoopResult(len(offsets), moving_time, takeovers, np.array(offsets), np.array(headings),
                       np.array(steer), shots, rules, off_road_time, np.array(limits).reshape(-1, 2),
-                      np.array(person, bool), before)
+                      np.array(person, bool), before, reversing_s=reversing_time)

@@ -29,6 +29,17 @@ WHEELBASE_M = 2.6
 SESSION_GAP_S = 1.0
 #: Frame interval assumed where the names carry no time stamps (the simulator records at about 10 Hz).
 DEFAULT_DT_S = 0.1
+#: The recorded car reverses where its speed rises for at least this many frames running with the brake
+#: pressed: the log's speed is unsigned, and the Udacity car brakes only while it rolls forward faster than
+#: 5 mph; standing or rolling back, the brake key drives it backwards (its CarController's reverse torque).
+#: Braking forward only ever slows the car; three frames (0.3 s) keep a moment's jitter of the speed out.
+REVERSE_MIN_FRAMES = 3
+#: ... and the speed rises by at least this much over them (m/s; reversing from a standstill gains about
+#: 0.15 m/s a frame, the least rise seen under the brake on a forward slope was 0.05 m/s over 3 frames).
+REVERSE_MIN_GAIN_MPS = 0.4
+#: Turning round ends with a leg forwards at full lock (|steering| at least this; keyboard ramps reach 1.0 in 3
+#: frames): the person who reversed completes the turn and hands back once the wheel comes off the lock.
+REVERSE_LEG_LOCK = 0.9
 
 
 
@@ -51,6 +62,7 @@ class RecordedDrive:
     arc: np.ndarray
     left_frames: list[Path | None] | None = None
     right_frames: list[Path | None] | None = None
+    brake: np.ndarray | None = None  # the recorded brake (0..1; None: not known): where the car reversed
 
     def side_frame(self, i: int, side: str) -> Path | None:
         """Frame ``i`` of the ``left`` or ``right`` camera, or None (the log reader keeps only side frames
@@ -86,7 +98,44 @@ def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUni
         arc[i] = 0.0 if session[i] != session[i - 1] else arc[i - 1] + step[i - 1]
     steering = np.array([s.steering for s in samples], np.float64)
     return RecordedDrive([s.center for s in samples], steering, speed, dt, session, arc,
-                         [s.left for s in samples], [s.right for s in samples])
+                         [s.left for s in samples], [s.right for s in samples],
+                         np.array([s.brake for s in samples], np.float64))
+
+
+def reversing(drive: RecordedDrive) -> np.ndarray:
+    """Per frame: the recorded driver was turning round: reversing (standing just before, rolling back just
+    after it) and the leg forwards at full lock that completes the turn.
+
+    The log's speed has no sign, so :func:`recorded_drive` rebuilds a reversing car as one driving forward,
+    turning the other way. A car whose speed rises with the brake pressed is reversing
+    (:data:`REVERSE_MIN_FRAMES`, :data:`REVERSE_MIN_GAIN_MPS`); the stretch runs back to the standstill it
+    started from, and on while the brake is held and until the car, the brake let go, has stopped rolling
+    back (the speed's lowest point on either side, within the session), and on while the wheel stays at full
+    lock (:data:`REVERSE_LEG_LOCK`)."""
+    n = len(drive)
+    out = np.zeros(n, bool)
+    if drive.brake is None or n < 2:
+        return out
+    rising = np.r_[(drive.brake[:-1] > 0) & (np.diff(drive.speed) > 0) & (drive.dt[:-1] > 0), False]
+    start = None
+    for i, flag in enumerate([*rising, False]):
+        if flag and start is None:
+            start = i
+        elif not flag and start is not None:
+            end = i  # the frame the rise ended at
+            if end - start >= REVERSE_MIN_FRAMES and drive.speed[end] - drive.speed[start] >= REVERSE_MIN_GAIN_MPS:
+                a, b = start, end
+                while a > 0 and drive.session[a - 1] == drive.session[a] and drive.speed[a - 1] <= drive.speed[a]:
+                    a -= 1  # back to the standstill it started from
+                while b + 1 < n and drive.session[b + 1] == drive.session[b] and (
+                        drive.speed[b + 1] <= drive.speed[b] or drive.brake[b] > 0):
+                    b += 1  # on while the brake drives it backwards, and until it has stopped rolling back
+                while b + 1 < n and drive.session[b + 1] == drive.session[b] and \
+                        abs(drive.steering[b + 1]) >= REVERSE_LEG_LOCK:
+                    b += 1  # the leg forwards at full lock that completes the turn
+                out[a:b + 1] = True
+            start = None
+    return out
 
 
 def running_median(values: np.ndarray, frames: int) -> np.ndarray:

@@ -120,6 +120,7 @@ def write_offset_plot(result: LoopResult, path: Path, title: str, size: tuple[in
     draw_text(img, f"grey: where the car leaves the lane ({lane})", (width - 330, 18), px=11, color=(90, 90, 90))
     draw_text(img, title, (left, 18), px=13, color=(30, 30, 30))
     off_road = f", and {result.off_road_s:.0f} s where the driver left the road" if result.off_road_s else ""
+    off_road += f", and {result.reversing_s:.0f} s where the driver reversed" if result.reversing_s else ""
     draw_text(img, f"step of the loop (0 .. {n - 1}, one per recorded frame interval); red: take-overs "
                    f"({result.interventions}); pink: a person drives ({result.rules.handback_s:g} s each"
                    f"{off_road})",

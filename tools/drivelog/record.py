@@ -30,6 +30,7 @@ def result_record(result: LoopResult, data: Path, frames: int, driver: str, bias
         "steps": result.frames,
         "driving_time_s": round(result.driving_time_s, 2),
         "off_road_s": round(result.off_road_s, 2),  # the recorded driver off the road: not counted
+        "reversing_s": round(result.reversing_s, 2),  # the recorded driver reversing (person_reverses): not counted
         "takeovers": [{"frame": t.frame, "time_s": round(t.time_s, 2), "offset_m": round(t.offset_m, 3)}
                       for t in result.takeovers],
         "rules": asdict(result.rules),

@@ -87,7 +87,8 @@ def chosen_rows(drive: RecordedDrive, road: RoadEdges | None, keep: np.ndarray
         return None if frames is None else [frames[i] for i in idx]
 
     cut = RecordedDrive([drive.frames[i] for i in idx], drive.steering[idx], drive.speed[idx], dt, session, arc,
-                        pick(drive.left_frames), pick(drive.right_frames))
+                        pick(drive.left_frames), pick(drive.right_frames),
+                        None if drive.brake is None else drive.brake[idx])
     if road is None:
         return cut, None
     return cut, replace(road, left_m=road.left_m[idx], right_m=road.right_m[idx], measured=road.measured[idx],

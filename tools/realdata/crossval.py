@@ -57,6 +57,7 @@ class RecordingScore:
     intent_r: float | None = None
     smooth: float = 1.0  # the model's steering smoothed as drive_server does (drive_server.serving.smoothing; 1: not)
     off_road_s: float | None = None  # closed loop: log time the recorded driver was off the road (not counted)
+    reversing_s: float | None = None  # closed loop: log time the recorded driver reversed (not counted)
 
     @property
     def beats_zero(self) -> bool:
@@ -96,12 +97,13 @@ def score_recording(rec: PublicRecording, root: Path, model: Path, closed_loop: 
 
     data = root / rec.name
     (score,) = score_models([model], data, smooth_frames=INTENT_FRAMES, smooth=smooth)
-    eta = interventions = per_takeover = off_road = None
+    eta = interventions = per_takeover = off_road = reversed_s = None
     if closed_loop and rec.track in CLOSED_LOOP_TRACKS:
-        eta, interventions, per_takeover, off_road = _closed_loop(data, model, rules, smooth, rec.track)
+        eta, interventions, per_takeover, off_road, reversed_s = _closed_loop(data, model, rules, smooth, rec.track)
     return RecordingScore(rec.name, rec.track, rec.fold, str(model), score.frames, round(score.zero_mse, 5),
                           round(score.mse, 5), round(score.pearson_r, 4), eta, interventions, per_takeover,
-                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth, off_road)
+                          _rounded(score.pearson_r_smoothed), _rounded(score.intent_r), score.smooth, off_road,
+                          reversed_s)
 
 
 def _rounded(value: float | None) -> float | None:
@@ -109,9 +111,9 @@ def _rounded(value: float | None) -> float | None:
 
 
 def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float | None,
-                 track: str | None = None) -> tuple[float, int, float, float]:
-    """eta, take-overs, seconds driven per take-over, and seconds the recorded driver was off the road; the road
-    found by ``track``'s profile (None: told from the frames)."""
+                 track: str | None = None) -> tuple[float, int, float, float, float]:
+    """eta, take-overs, seconds driven per take-over, and seconds the recorded driver was off the road and
+    reversing; the road found by ``track``'s profile (None: told from the frames)."""
     from protocol.datalog import read_log
     from tools.drivelog.path import recorded_drive
     from tools.drivelog.run import drive_recording
@@ -119,7 +121,7 @@ def _closed_loop(data: Path, model: Path, rules: LoopRules | None, smooth: float
     log = recorded_drive(read_log(data)[0])
     result = drive_recording(log, rules, model, smooth=smooth, snapshots=0, track=track).result  # as rbc drive-log
     return (round(result.eta, 2), result.interventions, round(result.driving_time_s / max(1, result.interventions), 2),
-            round(result.off_road_s, 2))
+            round(result.off_road_s, 2), round(result.reversing_s, 2))
 
 
 def score_all(recs: Sequence[PublicRecording], root: Path, pattern: str, closed_loop: bool = True,
