@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -61,11 +62,38 @@ def test_poisson_bound_and_f_beta():
 
 
 def test_runs_are_never_calibration_worlds():
-    from tools.monitoreval.runset import NOMINAL_WORLDS, failing_runs, nominal_runs
+    from tools.monitoreval.bench import EvalPlan
+    from tools.monitoreval.runset import NOMINAL_WORLDS, failing_runs, failure_training_runs, nominal_runs
 
     calibration = set(range(0, 30)) | set(range(200, 230))  # the bundled monitor's training and calibration worlds
-    worlds = {int(s.track.split(":")[1]) for s in nominal_runs(200) + failing_runs(6) if s.track.startswith("world:")}
+    bench = nominal_runs(200) + failing_runs(EvalPlan.per_setting)
+    worlds = {int(s.track.split(":")[1]) for s in bench if s.track.startswith("world:")}
     assert not worlds & calibration and set(NOMINAL_WORLDS) & worlds
+    # nor the failure predictor's runs: no track in common, and no degraded copy (noise sigma and seed) in common
+    train = failure_training_runs(6, 20)
+    assert not {s.track for s in bench} & {s.track for s in train}
+    noised = {(s.weight_noise, s.seed) for s in bench if s.weight_noise}
+    assert (0.7, 200) in noised and not noised & {(s.weight_noise, s.seed) for s in train if s.weight_noise}
+
+
+def test_the_default_plan_grades_every_axis_and_holds_enough_failing_runs():
+    """The graded intensities the misbehaviour count rests on (docs/monitor.md, "4. Measure it"): light up to 12
+    with the milder grades kept, weight noise up to 0.7; --per-setting runs of each."""
+    from tools.monitoreval.bench import EvalPlan
+    from tools.monitoreval.runset import PERTURBATIONS, WEIGHT_NOISE
+
+    plan = EvalPlan(Path("m.onnx"), Path("out"))
+    specs = plan.specs()
+    settings = {(s.axis, s.intensity) for s in specs if s.group != "nominal"}
+    assert {("light", v) for v in (0.12, 0.18, 0.25, 4.0, 6.0, 8.0, 10.0, 12.0)} <= settings
+    assert {("weight_noise", v) for v in (0.15, 0.3, 0.5, 0.7)} <= settings
+    per = {}
+    for s in specs:
+        per[(s.axis, s.intensity)] = per.get((s.axis, s.intensity), 0) + 1
+    assert all(per[k] == plan.per_setting for k in settings)
+    count = sum(len(v) for v in PERTURBATIONS.values()) + len(WEIGHT_NOISE)
+    assert len(specs) == plan.nominal + count * plan.per_setting
+    assert not any(s.checkpoint for s in specs)  # under-trained checkpoints only when given
 
 
 @pytest.mark.slow
@@ -193,3 +221,130 @@ def test_the_threshold_sweep_replays_each_monitor_at_lower_thresholds():
     assert by[("ae", "calibrated)")]["r123"] == "0.0 % / 0.0 % / 0.0 %"
     assert by[("ae", "calibration p99)")]["r123"] == "100.0 % / 100.0 % / 100.0 %"
     assert by[("shift", "calibration p99)")]["lead1"] == "100.0 %"  # its window mean crosses 0.3 within 2 s
+
+
+def _edited(src: Path, dst: Path, **meta: str) -> Path:
+    """``src`` with metadata keys set (``rbc_preprocess`` for ``rbc.preprocess``)."""
+    import onnx
+
+    proto = onnx.load(str(src))
+    have = {m.key: m.value for m in proto.metadata_props} | {k.replace("_", "."): v for k, v in meta.items()}
+    del proto.metadata_props[:]
+    for key, value in have.items():
+        proto.metadata_props.add(key=key, value=value)
+    onnx.save(proto, str(dst))
+    return dst
+
+
+@pytest.fixture()
+def served_and_checkpoint(tmp_path):
+    from helpers_server import build_shallow
+    from test_monitor import _brightness_graph, _with_monitor
+
+    from drive_server.serving.monitor import MonitorSpec
+
+    served = _with_monitor(build_shallow(tmp_path / "s.onnx", seed=3), tmp_path / "served.onnx",
+                           MonitorSpec("brightness", -0.6, -0.55, 15), _brightness_graph())
+    record = json.dumps({"arch": "shallow", "weights": "random", "epochs": 4, "exported_epoch": 1})
+    return served, _edited(build_shallow(tmp_path / "raw.onnx", seed=4), tmp_path / "epoch1.onnx", rbc_model=record)
+
+
+def test_a_checkpoint_that_reads_or_is_served_otherwise_is_refused_in_one_line(served_and_checkpoint, tmp_path,
+                                                                                  capsys):
+    from models.onnxfiles.mirror_onnx import mirror_average_onnx
+    from protocol.errors import BadValue
+    from tools.cli import main
+    from tools.monitoreval.runner import check_checkpoint
+    from tools.sim.driving.model_rig import RIGS, model_rig
+
+    served, good = served_and_checkpoint
+    check_checkpoint(served, good)  # another network of the same contract: fine
+    contract = json.loads(_read_meta(good)["rbc.preprocess"]) | {"crop_top": 40}
+    mirrored = tmp_path / "mirrored.onnx"
+    mirror_average_onnx(good, mirrored)
+    other_rig = next(r for r in RIGS if r != model_rig(served))
+    bad = {"preprocessing": _edited(good, tmp_path / "crop.onnx", rbc_preprocess=json.dumps(contract)),
+           "mirror average": mirrored,
+           "smoothed": _edited(good, tmp_path / "smooth.onnx", rbc_serving='{"smoothing": 0.5}'),
+           "camera": _edited(good, tmp_path / "rig.onnx", rbc_model=json.dumps({"camera_rig": other_rig})),
+           "itself": served}
+    for words, path in bad.items():
+        with pytest.raises(BadValue, match=words) as info:
+            check_checkpoint(served, path)
+        assert "\n" not in str(info.value)
+    assert main(["monitor", "eval", str(served), "--out", str(tmp_path / "eval"), "--undertrained", str(mirrored),
+                 "--nominal", "1", "--per-setting", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "checkpoint mirrored.onnx" in err[0] and "mirror average" in err[0]
+    assert not (tmp_path / "eval" / "runs.jsonl").exists()  # refused before any run
+
+
+def _read_meta(path: Path) -> dict[str, str]:
+    import onnx
+
+    return {m.key: m.value for m in onnx.load(str(path)).metadata_props}
+
+
+def test_the_checkpoints_copy_carries_the_served_monitor_and_its_runs_are_keyed_by_its_content(
+        served_and_checkpoint, tmp_path, monkeypatch):
+    import onnx
+    from helpers_server import build_shallow
+
+    from tools.monitoreval import runner
+    from tools.monitoreval.runset import undertrained_runs
+
+    served, checkpoint = served_and_checkpoint
+    copy = runner.undertrained_model(checkpoint, served, tmp_path / "models")
+    meta, served_meta = _read_meta(copy), _read_meta(served)
+    assert {k: v for k, v in meta.items() if k.startswith("rbc.monitor")} == \
+        {k: v for k, v in served_meta.items() if k.startswith("rbc.monitor")} and "rbc.monitor" in meta
+    assert meta["rbc.model"] == _read_meta(checkpoint)["rbc.model"]  # the checkpoint's own record
+    assert onnx.load(str(copy)).graph == onnx.load(str(checkpoint)).graph  # its network, not the served one
+
+    driven = []
+
+    def fake(spec, path, mode, shadows=()):
+        driven.append(path)
+        return {"t": [0.0], "level": "0", "mean": [0.0], "takeovers": [], "sim_time_s": 1.0}
+
+    monkeypatch.setattr(runner, "drive", fake)
+    out = tmp_path / "eval"
+
+    def keys() -> list[dict]:
+        specs = undertrained_runs([("epoch1", runner.file_digest(checkpoint), 1.0)], 1)
+        runner.drive_all(specs, served, ("warn",), out, checkpoints=(checkpoint,))
+        return [json.loads(json.loads(line)["key"]) for line in (out / runner.JOURNAL).read_text().splitlines()]
+
+    first = keys()
+    assert len(first) == 1 and driven[-1].name.startswith("epoch1-watched-")
+    assert first[0]["model"] == runner.file_digest(driven[-1]) != runner.file_digest(checkpoint)
+    assert first[0]["spec"]["axis"] == "undertrained" and first[0]["spec"]["group"] == "degraded"
+    assert keys() == first and len(driven) == 1  # the same checkpoint: from the journal
+    build_shallow(checkpoint, seed=5)  # the same file name, other weights (another epoch)
+    second = keys()
+    assert len(driven) == 2 and len(second) == 2 and second[1]["model"] != first[0]["model"]
+
+
+def test_the_record_lists_the_checkpoints_and_scores_them_as_an_axis(served_and_checkpoint, tmp_path, monkeypatch):
+    from tools.monitoreval import runner
+    from tools.monitoreval.bench import EvalPlan, evaluate
+
+    served, checkpoint = served_and_checkpoint
+    t = [round(i / HZ, 3) for i in range(20 * HZ)]
+
+    def fake(spec, path, mode, shadows=()):  # every under-trained run leaves the road at 10 s, warned from 8 s
+        fails = spec.axis == "undertrained"
+        level = "".join("1" if fails and 8 <= x < 10 else "0" for x in t)
+        return {"t": t, "level": level, "mean": [0.0] * len(t), "takeovers": [[10.0, "off_road"]] if fails else [],
+                "sim_time_s": 20.0, "eta": 100.0, "completed": True, "lap_time_s": 20.0, "mean_speed_kmh": 20.0,
+                "monitor_failed": False, "shadows": {}}
+
+    monkeypatch.setattr(runner, "drive", fake)
+    record = evaluate(EvalPlan(served, tmp_path / "eval", nominal=2, per_setting=2, undertrained=(checkpoint,)))
+    assert record["undertrained"] == [{"file": "epoch1.onnx", "sha256": runner.file_digest(checkpoint),
+                                       "epochs": 1.0}]
+    assert record["plan"]["undertrained"] == [str(checkpoint)]
+    assert record["figures"]["by_axis"]["undertrained"]["misbehaviours"] == 2
+    assert record["figures"]["by_axis"]["undertrained"]["recall_1"] == 1.0
+    assert {s.intensity for s in EvalPlan(served, tmp_path, undertrained=(checkpoint,)).specs()
+            if s.axis == "undertrained"} == {1.0}  # graded by the epochs it was trained

@@ -43,6 +43,7 @@ def test_a_run_file_round_trips_and_a_broken_one_is_one_line(tmp_path: Path) -> 
 
 
 def test_the_predictors_runs_never_touch_benchmark_calibration_or_evaluation_worlds() -> None:
+    from tools.monitoreval.bench import EvalPlan
     from tools.monitoreval.calibruns import CALIBRATION_WORLDS, calibration_runs
     from tools.monitoreval.runset import (
         FAILURE_WORLDS,
@@ -60,7 +61,7 @@ def test_the_predictors_runs_never_touch_benchmark_calibration_or_evaluation_wor
     assert worlds <= set(FAILURE_WORLDS) and len(worlds) > 50
     assert not worlds & (set(NOMINAL_WORLDS) | set(CALIBRATION_WORLDS)) and max(worlds) < UNSEEN_WORLDS_FIRST
     assert not {s.axis for s in train} & set(HELD_OUT_AXES)
-    bench = {s.track for s in nominal_runs(90) + failing_runs(6)}
+    bench = {s.track for s in nominal_runs(EvalPlan.nominal) + failing_runs(EvalPlan.per_setting)}
     assert not bench & {s.track for s in train} and not bench & {s.track for s in calibration_runs(30)}
     assert {int(s.track.split(":")[1]) for s in calibration_runs(30)} == set(CALIBRATION_WORLDS)
 

@@ -86,6 +86,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ev.add_argument("--also", type=Path, action="append", default=[], metavar="M.onnx",
                     help="another monitor to compare on the very same drives: the same steering model with another "
                          "monitor attached (repeat)")
+    ev.add_argument("--undertrained", type=Path, action="append", default=[], metavar="M.onnx",
+                    help="a degraded model: a steering model of MODEL's recipe stopped early (rbc train --recipe R "
+                         "--epochs 1, treated as MODEL was, e.g. rbc mirror), with MODEL's preprocessing and serving "
+                         "settings; driven --per-setting times with MODEL's monitor attached (repeat)")
     ev.add_argument("--rescore", action="store_true",
                     help="drive nothing: score the runs OUT's journal holds again (after a change of the scoring "
                          "or the tables), whatever code drove them; the record lists those code versions")
@@ -140,13 +144,16 @@ def _eval(args: argparse.Namespace) -> int:
         raise CommandError(f"no model at {args.model}")
     if args.nominal < 1 or args.per_setting < 1:
         raise CommandError("--nominal and --per-setting must be >= 1")
+    for path in args.undertrained:
+        if not path.is_file():
+            raise CommandError(f"--undertrained {path}: no such file")
     cost_log = args.cost_log
     if cost_log is None:
         sample = Path(__file__).resolve().parents[2] / "tests" / "data" / "udacity-sample"
         cost_log = sample if sample.is_dir() else None
     plan = EvalPlan(args.model, args.out, nominal=args.nominal, per_setting=args.per_setting, act=args.act,
                     cost_log=cost_log, workers=args.workers, shadows=tuple(args.also),
-                    rescore=args.rescore)
+                    undertrained=tuple(args.undertrained), rescore=args.rescore)
     import logging
 
     if not logging.getLogger().isEnabledFor(logging.DEBUG):  # hundreds of runs: their state changes only with -v

@@ -61,11 +61,90 @@ def degraded_model(src: Path, folder: Path, sigma: float, seed: int = 0) -> Path
     return dst
 
 
+def check_checkpoint(served: Path, checkpoint: Path) -> None:
+    """BadValue (one line) unless ``checkpoint`` can stand in for ``served`` under its monitor: another file that
+    reads the same input (preprocessing contract ``rbc.preprocess``, input shape, camera rig), answers the mirror
+    average alike (graph outputs :data:`~tools.monitoreval.candidates.MIRROR_HALVES`) and asks for the same serving
+    settings (``rbc.serving``: gain, smoothing)."""
+    from drive_server.serving.settings import SERVING_KEY, Serving
+    from models.onnxfiles.onnx_metadata import read_steering_graph
+    from tools.monitoreval.candidates import MIRROR_HALVES
+    from tools.sim.driving.model_rig import model_rig
+
+    name, hint = Path(checkpoint).name, "give a checkpoint of the served model's recipe, exported and mirrored alike"
+    if file_digest(checkpoint) == file_digest(served):
+        raise BadValue(f"checkpoint {name}: the served model {Path(served).name} itself", hint)
+    a, b = read_steering_graph(served, BadValue), read_steering_graph(checkpoint, BadValue)
+    if b.contract != a.contract or b.shape[1:] != a.shape[1:]:
+        raise BadValue(f"checkpoint {name}: its preprocessing (rbc.preprocess, input shape) differs from "
+                       f"{Path(served).name}'s", hint)
+    if model_rig(checkpoint) != model_rig(served):
+        raise BadValue(f"checkpoint {name}: trained for the {model_rig(checkpoint)} camera, {Path(served).name} for "
+                       f"the {model_rig(served)} camera", hint)
+
+    def mirrored(proto: Any) -> bool:
+        return set(MIRROR_HALVES) <= {out for node in proto.graph.node for out in node.output}
+
+    if mirrored(a.proto) != mirrored(b.proto):
+        raise BadValue(f"checkpoint {name}: {'answers' if mirrored(b.proto) else 'does not answer'} the mirror "
+                       f"average and {Path(served).name} {'does not' if mirrored(b.proto) else 'does'}",
+                       "treat it as the served model was (rbc mirror)")
+    try:
+        settings = [Serving.from_json(g.meta.get(SERVING_KEY)) for g in (a, b)]
+    except BadValue as exc:
+        raise BadValue(f"checkpoint {name} or {Path(served).name}: {exc}") from None
+    if settings[0] != settings[1]:
+        raise BadValue(f"checkpoint {name}: served with {settings[1].describe() or 'nothing asked'}, "
+                       f"{Path(served).name} with {settings[0].describe() or 'nothing asked'}", hint)
+
+
+def checkpoint_epochs(checkpoint: Path) -> float:
+    """How many epochs ``checkpoint`` was trained (its record's exported epoch, else its epochs); 0 if it cannot
+    say."""
+    from models.onnxfiles.onnx_metadata import read_steering_graph
+
+    info = read_steering_graph(checkpoint, BadValue).info
+    for key in ("exported_epoch", "epochs"):
+        value = info.get(key)
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value)
+    return 0.0
+
+
+def undertrained_model(checkpoint: Path, served: Path, folder: Path) -> Path:
+    """``checkpoint`` (checked by :func:`check_checkpoint`) carrying the served model's monitor: every ``rbc.monitor``
+    metadata key of ``served`` in place of any the checkpoint has, the rest of the checkpoint as it is. Cached in
+    ``folder`` by both files' content, so a run of it is keyed by the checkpoint's content and the monitor's."""
+    import onnx
+
+    from drive_server.serving.monitor import MONITOR_KEY
+    from protocol.runrecords import atomic_path
+
+    check_checkpoint(served, checkpoint)
+    dst = Path(folder) / f"{Path(checkpoint).stem}-watched-{file_digest(checkpoint)}-{file_digest(served)}.onnx"
+    if dst.is_file():
+        return dst
+
+    def monitor_key(key: str) -> bool:
+        return key == MONITOR_KEY or key.startswith(MONITOR_KEY + ".")
+
+    proto = onnx.load(str(checkpoint))
+    served_meta = [(m.key, m.value) for m in onnx.load(str(served)).metadata_props if monitor_key(m.key)]
+    kept = [(m.key, m.value) for m in proto.metadata_props if not monitor_key(m.key)]
+    del proto.metadata_props[:]
+    for key, value in kept + served_meta:
+        proto.metadata_props.add(key=key, value=value)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(dst) as tmp:
+        onnx.save(proto, str(tmp))
+    return dst
+
+
 @dataclass(frozen=True)
 class RunKey:
     spec: RunSpec
     mode: str
-    model: str  # content digest of the file driven (the degraded copy for a degraded run)
+    model: str  # content digest of the file driven (the degraded or under-trained copy for a degraded run)
     code: str
     shadows: tuple[str, ...] = ()  # content digests of the monitors scored in the shadow of the driving one
 
@@ -166,13 +245,17 @@ class Journal:
 def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Path,
               progress: Callable[[int, int, str], None] | None = None,
               workers: int = 1, shadows: tuple[Path, ...] = (),
-              rescore: bool = False) -> list[tuple[RunSpec, str, dict[str, Any]]]:
+              rescore: bool = False,
+              checkpoints: tuple[Path, ...] = ()) -> list[tuple[RunSpec, str, dict[str, Any]]]:
     """Every spec in every mode, resuming from ``out``'s journal; (spec, mode, run) in a fixed order whatever
     ``workers`` (processes driving runs side by side; each run is deterministic, so the order of finishing
     changes nothing but the journal's line order).
 
     ``rescore``: drive nothing; take each run from the journal whatever code drove it (its other key parts must
     match), for new scoring rules or tables over the same drives. A run the journal lacks is an error.
+
+    ``checkpoints``: the under-trained checkpoints that specs name (by content digest); each is driven as a copy
+    with the served model's monitor (:func:`undertrained_model`).
     """
     import concurrent.futures
     import multiprocessing
@@ -188,8 +271,19 @@ def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Pa
     shadow_digests = tuple(file_digest(p) for p in shadows)
     todo: dict[str, tuple[RunSpec, Path, str]] = {}
     order = []
+    by_digest = {file_digest(p): p for p in checkpoints}
+    watched: dict[str, Path] = {}  # checkpoint digest -> its copy with the served monitor
     for spec in specs:
-        path = degraded_model(model, models, spec.weight_noise, spec.seed) if spec.weight_noise else model
+        if spec.checkpoint:
+            if spec.checkpoint not in by_digest:
+                raise BadValue(f"{spec.name}: no checkpoint given with content {spec.checkpoint}")
+            if spec.checkpoint not in watched:
+                watched[spec.checkpoint] = undertrained_model(by_digest[spec.checkpoint], model, models)
+            path = watched[spec.checkpoint]
+        elif spec.weight_noise:
+            path = degraded_model(model, models, spec.weight_noise, spec.seed)
+        else:
+            path = model
         digest = file_digest(path)
         for mode in modes:
             key = RunKey(spec, mode, digest, code, shadow_digests).text()

@@ -5,6 +5,7 @@ unseen worlds, and degraded models. Nothing here is a calibration run: the monit
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -28,8 +29,8 @@ class RunSpec:
 
     name: str
     group: str  # "nominal", "perturbed" or "degraded"
-    axis: str  # what is changed: "none", "light", "sun", "yaw", "cones", "unseen_world", "weight_noise"
-    intensity: float  # the axis's value (light factor, degrees, cones, noise sigma); 0 for none
+    axis: str  # what is changed: "none", "light", "sun", "yaw", "cones", "unseen_world", "weight_noise", "undertrained"
+    intensity: float  # the axis's value (light factor, degrees, cones, noise sigma, a checkpoint's epochs); 0 for none
     track: str
     seed: int = 0
     light_intensity: float = 1.0
@@ -37,9 +38,15 @@ class RunSpec:
     yaw_offset_deg: float = 0.0
     cones: int = 0
     weight_noise: float = 0.0  # sigma of the steering weights' noise, relative to each tensor's std
+    # an under-trained checkpoint driven instead of the served model, with the served model's monitor: the content
+    # digest of its file (runner.file_digest); "" for the served model
+    checkpoint: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        if not d["checkpoint"]:  # a run of the served model is keyed as it was before checkpoints existed
+            del d["checkpoint"]
+        return d
 
 
 def nominal_runs(count: int) -> list[RunSpec]:
@@ -57,14 +64,14 @@ def nominal_runs(count: int) -> list[RunSpec]:
 
 #: The perturbed axes and their graded intensities (the paper's robustness axes, Tables 9-10, pushed further).
 PERTURBATIONS: dict[str, tuple[float, ...]] = {
-    "light": (0.12, 0.18, 0.25, 4.0, 6.0),  # scene light intensity (1: nominal)
+    "light": (0.12, 0.18, 0.25, 4.0, 6.0, 8.0, 10.0, 12.0),  # scene light intensity (1: nominal)
     "sun": (120.0, 180.0),  # sun direction offset, degrees
     "yaw": (25.0, 40.0, -25.0, -40.0),  # spawn heading offset, degrees
     "cones": (10.0, 20.0),  # traffic cones on the road (this model was never taught to avoid them)
     "unseen_world": (0.0,),  # a world of the evaluation seeds
 }
 #: Degraded steering models: Gaussian noise on every weight tensor, sigma relative to the tensor's std.
-WEIGHT_NOISE = (0.15, 0.3, 0.5)
+WEIGHT_NOISE = (0.15, 0.3, 0.5, 0.7)
 
 
 def failing_runs(per_setting: int) -> list[RunSpec]:
@@ -85,10 +92,22 @@ def failing_runs(per_setting: int) -> list[RunSpec]:
                                    cones=int(value) if axis == "cones" else 0))
     for sigma in WEIGHT_NOISE:
         for k in range(per_setting):
-            track = "lake" if k % 2 == 0 else f"world:{NOMINAL_WORLDS[(k * 11) % len(NOMINAL_WORLDS)]}"
-            out.append(RunSpec(f"noise{sigma:g}-{k}", "degraded", "weight_noise", sigma, track, seed=200 + k,
-                               weight_noise=sigma))
+            out.append(RunSpec(f"noise{sigma:g}-{k}", "degraded", "weight_noise", sigma, _degraded_track(k),
+                               seed=200 + k, weight_noise=sigma))
     return out
+
+
+def _degraded_track(k: int) -> str:
+    """The ``k``-th run of a degraded model: lake and worlds in turn."""
+    return "lake" if k % 2 == 0 else f"world:{NOMINAL_WORLDS[(k * 11) % len(NOMINAL_WORLDS)]}"
+
+
+def undertrained_runs(checkpoints: Sequence[tuple[str, str, float]], per_setting: int) -> list[RunSpec]:
+    """``per_setting`` runs of each under-trained checkpoint, given as (name, content digest, epochs trained), on
+    the weight-noise runs' tracks and spawn seeds (lake and worlds in turn)."""
+    return [RunSpec(f"undertrained-{name}-{k}", "degraded", "undertrained", epochs, _degraded_track(k), seed=200 + k,
+                    checkpoint=digest)
+            for name, digest, epochs in checkpoints for k in range(per_setting)]
 
 
 #: The failure predictor's settings: harsher than the benchmark's, so the steering model, which drives its own
