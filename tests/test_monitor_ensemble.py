@@ -42,7 +42,7 @@ def _outputs(path: Path, x: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def members(tmp_path_factory) -> list[Path]:
-    from tools.monitoreval.runner import degraded_model
+    from tools.monitoreval.modelfiles import degraded_model
 
     folder = tmp_path_factory.mktemp("members")
     return [degraded_model(GENERALIST, folder, 0.1, seed) for seed in (1, 2, 3)]

@@ -254,7 +254,7 @@ def test_a_checkpoint_that_reads_or_is_served_otherwise_is_refused_in_one_line(s
     from models.onnxfiles.mirror_onnx import mirror_average_onnx
     from protocol.errors import BadValue
     from tools.cli import main
-    from tools.monitoreval.runner import check_checkpoint
+    from tools.monitoreval.modelfiles import check_checkpoint
     from tools.sim.driving.model_rig import RIGS, model_rig
 
     served, good = served_and_checkpoint
@@ -348,3 +348,15 @@ def test_the_record_lists_the_checkpoints_and_scores_them_as_an_axis(served_and_
     assert record["figures"]["by_axis"]["undertrained"]["recall_1"] == 1.0
     assert {s.intensity for s in EvalPlan(served, tmp_path, undertrained=(checkpoint,)).specs()
             if s.axis == "undertrained"} == {1.0}  # graded by the epochs it was trained
+
+
+def test_runs_of_one_setting_on_a_built_in_track_start_from_other_spawns() -> None:
+    """Two runs of a setting on lake differ only by their seed: with the nominal spawn they would be the same
+    drive, and the benchmark would count each failure several times."""
+    from tools.monitoreval.runner import scenario
+    from tools.monitoreval.runset import failing_runs
+
+    lake = [s for s in failing_runs(4) if s.track == "lake" and s.axis == "light" and s.intensity == 8.0]
+    configs = [scenario(s, "unity") for s in lake]
+    assert len(configs) == 2 and all(c.spawn_noise and c.seed != 0 for c in configs)
+    assert configs[0].seed != configs[1].seed and configs[0].light_intensity == configs[1].light_intensity

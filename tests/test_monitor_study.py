@@ -10,7 +10,7 @@ import numpy as np
 
 from models.monitoring.failures import FailureRun, save_run
 from tools.monitoreval.candidates import window_std
-from tools.monitoreval.runner import degraded_model, file_digest
+from tools.monitoreval.modelfiles import degraded_model, file_digest
 from tools.monitoreval.study import DEFAULT_MODEL, ScoredRun, evaluate, main, roc_auc, uneventful
 
 RATE = 15.0

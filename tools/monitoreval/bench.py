@@ -41,7 +41,7 @@ class EvalPlan:
 
     def checkpoints(self) -> list[tuple[Path, str, float]]:
         """Each under-trained checkpoint with its content digest and the epochs it was trained."""
-        from tools.monitoreval.runner import checkpoint_epochs, file_digest
+        from tools.monitoreval.modelfiles import checkpoint_epochs, file_digest
 
         return [(c, file_digest(c), checkpoint_epochs(c)) for c in self.undertrained]
 
@@ -54,8 +54,9 @@ class EvalPlan:
 def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
     from drive_server.serving.model import SteeringModel
     from tools.monitoreval.cost import monitor_cost
+    from tools.monitoreval.modelfiles import check_checkpoint, file_digest
     from tools.monitoreval.report import closed_loop, compare, figures, sweep, table_rows, tables
-    from tools.monitoreval.runner import check_checkpoint, drive_all, file_digest
+    from tools.monitoreval.runner import drive_all
 
     found = SteeringModel(plan.model).monitor()
     if found is None:

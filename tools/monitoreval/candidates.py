@@ -3,7 +3,7 @@ frame of a recorded run, and every candidate's one-second score from those answe
 
 A run's *reference* is the model that the monitor would ship beside (``generalist.onnx``); its *served* model is the
 file that drove it: the reference itself, or for a degraded run the reference with seeded weight noise
-(:func:`tools.monitoreval.runner.degraded_model`, recreated from the run's sigma and seed).
+(:func:`tools.monitoreval.modelfiles.degraded_model`, recreated from the run's sigma and seed).
 """
 
 from __future__ import annotations
@@ -22,12 +22,10 @@ from models.monitoring.calibrate import window_means
 from models.monitoring.ensemble import ensemble_scores
 from models.monitoring.failures import FailureRun
 from protocol.errors import BadValue
-from tools.monitoreval.runner import degraded_model, file_digest
+from tools.monitoreval.modelfiles import MIRROR_HALVES, degraded_model, file_digest
 
 log = logging.getLogger(__name__)
 
-#: The two halves of a mirror-averaged graph (``rbc mirror``): f(x) and f(x mirrored); steering = (a - b) / 2.
-MIRROR_HALVES = ("rbc_mirror_first", "rbc_mirror_second")
 MEMBER_SEED = 1000  # seeds of the weight-perturbed ensemble members (the runs' own copies use 500-505)
 
 

@@ -17,7 +17,8 @@ import numpy as np
 from models.monitoring.failures import SUFFIX, FailureRun, load_run, quantise, save_run
 from protocol.codeversion import code_digest
 from protocol.errors import BadValue
-from tools.monitoreval.runner import RUN_CODE, degraded_model, file_digest
+from tools.monitoreval.modelfiles import degraded_model, file_digest
+from tools.monitoreval.runner import RUN_CODE
 from tools.monitoreval.runset import RunSpec
 
 if TYPE_CHECKING:

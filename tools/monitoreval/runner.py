@@ -5,7 +5,6 @@ model file's content, and the version of the code that drives and scores it (der
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import os
@@ -18,126 +17,21 @@ import numpy as np
 
 from protocol.codeversion import code_digest
 from protocol.errors import BadValue
+from tools.monitoreval.modelfiles import degraded_model, file_digest, undertrained_model
 from tools.monitoreval.runset import RunSpec
 
 if TYPE_CHECKING:
     from drive_server.serving.client_monitor import ClientMonitor, MonitorReading
     from drive_server.serving.monitor import MonitorGraph
     from tools.sim.driving.drivers import Scene
+    from tools.sim.driving.scenario import ScenarioConfig
 
 log = logging.getLogger(__name__)
 
 JOURNAL = "runs.jsonl"
 #: The modules whose code a run's result depends on (their imports are followed).
-RUN_CODE = ("tools.monitoreval.runner", "tools.sim.driving.session", "tools.sim.driving.drivers",
-            "drive_server.serving.pipeline")
-
-
-def file_digest(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
-
-
-def degraded_model(src: Path, folder: Path, sigma: float, seed: int = 0) -> Path:
-    """``src`` with Gaussian noise on every weight tensor (sigma times the tensor's std), its metadata and monitor
-    kept: a model that drives worse on the same frames. Cached in ``folder`` by source content, sigma and seed."""
-    import onnx
-    from onnx import numpy_helper
-
-    from protocol.runrecords import atomic_path
-
-    dst = Path(folder) / f"{Path(src).stem}-noise{sigma:g}-s{seed}-{file_digest(src)}.onnx"
-    if dst.is_file():
-        return dst
-    rng = np.random.default_rng(seed)
-    proto = onnx.load(str(src))
-    for tensor in proto.graph.initializer:
-        w = numpy_helper.to_array(tensor)
-        if w.dtype != np.float32 or w.size < 2:
-            continue
-        noisy = (w + rng.normal(0.0, sigma * float(w.std()), w.shape)).astype(np.float32)
-        tensor.CopyFrom(numpy_helper.from_array(noisy, tensor.name))
-    with atomic_path(dst) as tmp:
-        onnx.save(proto, str(tmp))
-    return dst
-
-
-def check_checkpoint(served: Path, checkpoint: Path) -> None:
-    """BadValue (one line) unless ``checkpoint`` can stand in for ``served`` under its monitor: another file that
-    reads the same input (preprocessing contract ``rbc.preprocess``, input shape, camera rig), answers the mirror
-    average alike (graph outputs :data:`~tools.monitoreval.candidates.MIRROR_HALVES`) and asks for the same serving
-    settings (``rbc.serving``: gain, smoothing)."""
-    from drive_server.serving.settings import SERVING_KEY, Serving
-    from models.onnxfiles.onnx_metadata import read_steering_graph
-    from tools.monitoreval.candidates import MIRROR_HALVES
-    from tools.sim.driving.model_rig import model_rig
-
-    name, hint = Path(checkpoint).name, "give a checkpoint of the served model's recipe, exported and mirrored alike"
-    if file_digest(checkpoint) == file_digest(served):
-        raise BadValue(f"checkpoint {name}: the served model {Path(served).name} itself", hint)
-    a, b = read_steering_graph(served, BadValue), read_steering_graph(checkpoint, BadValue)
-    if b.contract != a.contract or b.shape[1:] != a.shape[1:]:
-        raise BadValue(f"checkpoint {name}: its preprocessing (rbc.preprocess, input shape) differs from "
-                       f"{Path(served).name}'s", hint)
-    if model_rig(checkpoint) != model_rig(served):
-        raise BadValue(f"checkpoint {name}: trained for the {model_rig(checkpoint)} camera, {Path(served).name} for "
-                       f"the {model_rig(served)} camera", hint)
-
-    def mirrored(proto: Any) -> bool:
-        return set(MIRROR_HALVES) <= {out for node in proto.graph.node for out in node.output}
-
-    if mirrored(a.proto) != mirrored(b.proto):
-        raise BadValue(f"checkpoint {name}: {'answers' if mirrored(b.proto) else 'does not answer'} the mirror "
-                       f"average and {Path(served).name} {'does not' if mirrored(b.proto) else 'does'}",
-                       "treat it as the served model was (rbc mirror)")
-    try:
-        settings = [Serving.from_json(g.meta.get(SERVING_KEY)) for g in (a, b)]
-    except BadValue as exc:
-        raise BadValue(f"checkpoint {name} or {Path(served).name}: {exc}") from None
-    if settings[0] != settings[1]:
-        raise BadValue(f"checkpoint {name}: served with {settings[1].describe() or 'nothing asked'}, "
-                       f"{Path(served).name} with {settings[0].describe() or 'nothing asked'}", hint)
-
-
-def checkpoint_epochs(checkpoint: Path) -> float:
-    """How many epochs ``checkpoint`` was trained (its record's exported epoch, else its epochs); 0 if it cannot
-    say."""
-    from models.onnxfiles.onnx_metadata import read_steering_graph
-
-    info = read_steering_graph(checkpoint, BadValue).info
-    for key in ("exported_epoch", "epochs"):
-        value = info.get(key)
-        if isinstance(value, int | float) and not isinstance(value, bool):
-            return float(value)
-    return 0.0
-
-
-def undertrained_model(checkpoint: Path, served: Path, folder: Path) -> Path:
-    """``checkpoint`` (checked by :func:`check_checkpoint`) carrying the served model's monitor: every ``rbc.monitor``
-    metadata key of ``served`` in place of any the checkpoint has, the rest of the checkpoint as it is. Cached in
-    ``folder`` by both files' content, so a run of it is keyed by the checkpoint's content and the monitor's."""
-    import onnx
-
-    from drive_server.serving.monitor import MONITOR_KEY
-    from protocol.runrecords import atomic_path
-
-    check_checkpoint(served, checkpoint)
-    dst = Path(folder) / f"{Path(checkpoint).stem}-watched-{file_digest(checkpoint)}-{file_digest(served)}.onnx"
-    if dst.is_file():
-        return dst
-
-    def monitor_key(key: str) -> bool:
-        return key == MONITOR_KEY or key.startswith(MONITOR_KEY + ".")
-
-    proto = onnx.load(str(checkpoint))
-    served_meta = [(m.key, m.value) for m in onnx.load(str(served)).metadata_props if monitor_key(m.key)]
-    kept = [(m.key, m.value) for m in proto.metadata_props if not monitor_key(m.key)]
-    del proto.metadata_props[:]
-    for key, value in kept + served_meta:
-        proto.metadata_props.add(key=key, value=value)
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(dst) as tmp:
-        onnx.save(proto, str(tmp))
-    return dst
+RUN_CODE = ("tools.monitoreval.runner", "tools.monitoreval.modelfiles", "tools.sim.driving.session",
+            "tools.sim.driving.drivers", "drive_server.serving.pipeline")
 
 
 @dataclass(frozen=True)
@@ -171,6 +65,17 @@ class _Shadowed:
         return getattr(self.primary, name)
 
 
+def scenario(spec: RunSpec, camera: str) -> ScenarioConfig:
+    """The simulator's set-up of one run. The spawn is jittered by the run's seed (``spawn_noise``): without it two
+    runs of one setting on a built-in track would be the same drive, and count the same failures twice."""
+    from tools.sim.driving.scenario import ScenarioConfig
+    from tools.sim.worldgen import resolve_track_name
+
+    return ScenarioConfig(track=resolve_track_name(spec.track), seed=spec.seed, spawn_noise=True,
+                          light_intensity=spec.light_intensity, light_direction_deg=spec.light_direction_deg,
+                          yaw_offset_deg=spec.yaw_offset_deg, cones=spec.cones, cone_seed=spec.seed, camera=camera)
+
+
 def drive(spec: RunSpec, model: Path, mode: str, shadows: tuple[Path, ...] = ()) -> dict[str, Any]:
     """One run: the per-frame monitor state and one-second mean, the take-overs, and the lap's figures; each
     of ``shadows`` (model files with another monitor for the same steering input) scored on every frame too."""
@@ -178,9 +83,7 @@ def drive(spec: RunSpec, model: Path, mode: str, shadows: tuple[Path, ...] = ())
     from drive_server.serving.model import SteeringModel
     from tools.sim.driving.drivers import OnnxDriver
     from tools.sim.driving.model_rig import model_rig
-    from tools.sim.driving.scenario import ScenarioConfig
     from tools.sim.driving.session import run_scenario
-    from tools.sim.worldgen import resolve_track_name
 
     graphs = []
     for path in shadows:
@@ -198,10 +101,7 @@ def drive(spec: RunSpec, model: Path, mode: str, shadows: tuple[Path, ...] = ())
     driver = Driver(model, monitor=MonitorPolicy(mode=MonitorMode(mode)))
     if driver.monitor is None:
         raise BadValue(f"{model.name} carries no monitor (attach one with rbc monitor fit)")
-    config = ScenarioConfig(track=resolve_track_name(spec.track), seed=spec.seed, light_intensity=spec.light_intensity,
-                            light_direction_deg=spec.light_direction_deg, yaw_offset_deg=spec.yaw_offset_deg,
-                            cones=spec.cones, cone_seed=spec.seed, camera=model_rig(model))
-    result = run_scenario(config, driver)
+    result = run_scenario(scenario(spec, model_rig(model)), driver)
     t = [round(when, 3) for when, _ in driver.readings]
     level = "".join(str(int(r.level)) if r is not None else "0" for _, r in driver.readings)
     mean = [round(r.mean, 6) if r is not None else None for _, r in driver.readings]

@@ -11,7 +11,7 @@ stretches away from take-overs, as ``rbc monitor fit`` calibrates).
 
 The candidates: (a) the bundled monitor's autoencoder error and the served model's shift disagreement; (b) the
 steering itself (its size, its spread over a second, its change from frame to frame), of the reference model and
-of the served one; (c) for a run driven by a weight-noised copy (:func:`tools.monitoreval.runner.degraded_model`,
+of the served one; (c) for a run driven by a weight-noised copy (:func:`tools.monitoreval.modelfiles.degraded_model`,
 recreated from the run's sigma and seed), the served steering's distance to the reference model, to the
 reference's network without its mirror average, and to every other model file of the same input contract; (d) an
 ensemble's spread: of the same-contract models if there are any, of the served model's two mirrored halves, and of
