@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, fields
 
 from drive_server.serving.contract import PreprocessContract
 from drive_server.serving.control import ControlLaw
+from protocol import SteerCommand
 from protocol.errors import BadValue
 from tools.envs.client import StepReport
 from tools.envs.worlds import WorldDistribution
@@ -263,3 +264,15 @@ def resolve_track(config: DriveEnvConfig) -> str:
     path = resolve_track_name(name)
     get_track(path)  # a bad name or file fails here, at make, not at the first reset (loaded once per process)
     return path
+
+
+def steer_command(steering: float, throttle: float | None, control: str, law: ControlLaw,
+                  speed_kmh: float) -> SteerCommand:
+    """The command of an action (each part already within -1..1): the steering as given; the throttle and brake
+    from Eq. 14 on the telemetry speed (``control="steer"``, as drive_server's pipeline computes them) or the
+    action's ``throttle``, cut to 0 at the speed limit (``control="steer_throttle"``)."""
+    if control == "steer":
+        return SteerCommand(steering=steering, throttle=law.command(law.steering_deg(steering), speed_kmh))
+    assert throttle is not None  # steer_throttle's actions have two parts
+    return SteerCommand(steering=steering, throttle=min(throttle, 0.0) if speed_kmh >= law.speed_limit_kmh
+                        else throttle)

@@ -23,7 +23,7 @@ from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
 from protocol.errors import BadValue, UserError
 from protocol.jpeg import decode_jpeg
 from tools.envs.client import Episode, HeadlessSimClient
-from tools.envs.config import config_from_kwargs, resolve_track
+from tools.envs.config import config_from_kwargs, resolve_track, steer_command
 from tools.envs.reset_options import check_reset_options
 from tools.envs.rotation import WorldRotation
 from tools.envs.worldcache import shared_cache
@@ -181,15 +181,8 @@ class DriveEnv(gym.Env):
         if a.shape != self.action_space.shape or not np.isfinite(a).all():
             raise BadValue(f"action must be {self.action_space.shape[0]} finite number(s) in [-1, 1], got {action!r}")
         a = np.clip(a, -1.0, 1.0)
-        steering = float(a[0])
-        speed_kmh = self.client.wire_speed_kmh()
-        if self.config.control == "steer":
-            throttle = self.law.command(self.law.steering_deg(steering), speed_kmh)
-        else:
-            throttle = float(a[1])
-            if speed_kmh >= self.law.speed_limit_kmh:
-                throttle = min(throttle, 0.0)
-        return SteerCommand(steering=steering, throttle=throttle)
+        return steer_command(float(a[0]), float(a[1]) if len(a) > 1 else None, self.config.control, self.law,
+                             self.client.wire_speed_kmh())
 
     def expert_action(self) -> np.ndarray:
         """The autopilot's action for the current state: its pure-pursuit steering, and (``steer_throttle``)
