@@ -18,7 +18,7 @@ from drive_server.serving.control import ControlLaw
 from protocol import SteerCommand
 from protocol.facts import COLLECT_SPEED_KMH
 from tools.sim.driving.drivers import AutopilotDriver, Frame, LocalDriver, OnnxDriver, Reply, Scene, SocketDriver
-from tools.sim.driving.scenario import ScenarioConfig
+from tools.sim.driving.scenario import RunResult, ScenarioConfig
 from tools.sim.driving.session import PIPELINE_DEPTH, run_scenario
 
 
@@ -207,3 +207,20 @@ def test_driver_scene_reaches_privileged_drivers():
     run_scenario(ScenarioConfig(cones=3, reverse=True, max_lap_time_s=0.5), Peek(), render=False)
     assert seen[0].direction == -1 and seen[0].cones.shape == (3, 2)
     assert seen[0].control_period_s == pytest.approx(1 / 15)
+
+
+def test_an_in_process_driver_reused_for_another_run_starts_it_afresh():
+    """rbc eval reuses one driver per worker: a model that asks for smoothing must not carry the last run's
+    steering into the next, or a run's result would depend on the runs its worker drove before it."""
+    model = Path(__file__).resolve().parents[1] / "models" / "pretrained" / "generalist.onnx"  # smoothing 0.5
+    short = ScenarioConfig(track="lake", max_lap_time_s=6.0, camera="unity")
+    fresh = run_scenario(short, OnnxDriver(model, ControlLaw(short.speed_limit_kmh)))
+    reused = OnnxDriver(model, ControlLaw(short.speed_limit_kmh))
+    run_scenario(ScenarioConfig(track="lake", max_lap_time_s=6.0, camera="unity", yaw_offset_deg=30.0), reused)
+    again = run_scenario(short, reused)
+
+    def drive(result: RunResult) -> str:  # what the car did, not how long the machine took
+        return json.dumps({k: v for k, v in result.to_dict().items() if "latency" not in k and "wall" not in k},
+                          sort_keys=True)
+
+    assert drive(again) == drive(fresh)

@@ -148,6 +148,7 @@ class OnnxDriver(LocalDriver):
     def start(self, scene: Scene) -> None:
         super().start(scene)
         self.monitor = self.pipeline.client_monitor()  # each run's monitor starts afresh
+        self.smoother = self.pipeline.smoother()  # ... and its smoothing: no steering carried over from a run before
         self.readings = []
 
     def steer(self, frame: Frame) -> SteerCommand:
