@@ -21,11 +21,12 @@ import statistics
 import sys
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 from protocol.errors import BadValue
+from tools.dagger.rlrecord import Comparison, PolicyScores, TrackScore
 from tools.envs.policydrivers import PolicySpec, policy_driver
 from tools.evaluate.evalrecord import EvalRun
 from tools.evaluate.experiments import is_autonomous, run_eta
@@ -73,7 +74,7 @@ class PolicyRunner(Runner):
         # the runner's spec names the file for the record; _launch drives the policy itself
         super().__init__(DriverSpec(model=policy.path or policy.name), workers, journal, on_result, reuse)
 
-    def _launch(self, task: Task) -> Any:
+    def _launch(self, task: Task) -> Future[EvalRun]:
         return self._pool.submit(run_policy_task, self.policy, task)
 
 
@@ -120,20 +121,19 @@ def _takeovers(record: EvalRun) -> int:
 
 
 def score_policy(policy: PolicySpec, folder: Path, worlds: Sequence[tuple[int, str]], tracks: Sequence[str],
-                 workers: int = 1) -> dict[str, Any]:
+                 workers: int = 1) -> PolicyScores:
     """One lap per world and per track at seed 0, as ``rbc dagger`` scores a round (``rbc eval``'s unseen_worlds and
     no_variation runs, behavior simplistic); the policy's scores."""
     from tools.evaluate.suite import SuiteConfig, run_suite
 
     rig = policy_rig(policy)
     base = SuiteConfig(behavior="simplistic", seeds=1, base_seed=SEED, laps=1, camera=rig, worlds=tuple(worlds))
-    # the worlds in one pool, then each track in its own, as rbc dagger scores a round: a worker's in-process ONNX
-    # driver keeps its smoothing state from one run to the next, so a run's figures depend on the runs before it
+    # the worlds in one pool, then each track in its own, as rbc dagger scores a round
     suites = ([replace(base, experiments=("unseen_worlds",))] if worlds else []) + [
         replace(base, track=track, experiments=("no_variation",)) for track in tracks]
     reuse = _journal(policy, folder)
-    scores: dict[str, Any] = {"name": policy.name, "kind": policy.kind, "path": policy.path, "camera_rig": rig}
-    track_scores: dict[str, dict[str, Any]] = {}
+    scores: PolicyScores = {"name": policy.name, "kind": policy.kind, "path": policy.path, "camera_rig": rig}
+    track_scores: dict[str, TrackScore] = {}
     for cfg in suites:
         runner = PolicyRunner(policy, workers, folder / "runs.jsonl", reuse=reuse)
         try:
@@ -163,7 +163,7 @@ def score_policy(policy: PolicySpec, folder: Path, worlds: Sequence[tuple[int, s
 
 def compare(policies: Sequence[PolicySpec], out: Path, worlds: int = 20, world_seed: int | None = None,
             world_config: str | None = None, tracks: Sequence[str] = DEFAULT_TRACKS,
-            workers: int = 1) -> dict[str, Any]:
+            workers: int = 1) -> Comparison:
     """Score every policy on the same worlds and tracks; write and return ``OUT/comparison.json``'s record."""
     from protocol.runrecords import code_version, write_json
     from tools.evaluate.journal import run_code
@@ -185,7 +185,7 @@ def compare(policies: Sequence[PolicySpec], out: Path, worlds: int = 20, world_s
                               parse_world_config(world_config) if world_config else WorldGenConfig(), resume=True)
             if worlds else None)
     files = [(int(seed), path) for seed, path in meta["files"].items()] if meta else []
-    record: dict[str, Any] = {
+    record: Comparison = {
         "what": "every policy one lap per world and track at seed 0, rbc eval's referee and degree of autonomy",
         "seed": SEED, "code_version": code_version(), "run_code": run_code(), "target_eta": TARGET_ETA,
         "worlds": meta, "tracks": list(tracks), "policies": []}
@@ -197,7 +197,7 @@ def compare(policies: Sequence[PolicySpec], out: Path, worlds: int = 20, world_s
     return record
 
 
-def table(record: dict[str, Any]) -> str:
+def table(record: Comparison) -> str:
     """The comparison as a Markdown table: one row per policy."""
     tracks = record["tracks"]
     head = ["policy", "worlds: mean autonomy", "worst world", "worlds ≥ 95 %", "take-overs", *tracks]

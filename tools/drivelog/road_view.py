@@ -12,6 +12,7 @@ they agree; a side seen alone counts only where the other side's road ran out of
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -53,7 +54,14 @@ BRICKS_REDDER = 4.0
 #: recording, is darker than the asphalt's lightness range with about its chroma (jungle: 10-20 %).
 SHADE_MIN_SHARE = 0.02
 _OUTSIDE = (255, 0, 255)  # magenta: pixels beyond the recorded frame (never asphalt)
-_OUTSIDE_LAB = cv2.cvtColor(np.array([[_OUTSIDE]], np.uint8), cv2.COLOR_RGB2LAB)[0, 0].astype(np.float32)
+
+
+@functools.cache
+def _outside_lab() -> np.ndarray:
+    """:data:`_OUTSIDE` in Lab. Computed on first use, not at import: an OpenCV call at import starts OpenCV's
+    thread pool in every process that imports this, and a process forked from one (rbc eval's workers) then
+    hangs in its first parallel OpenCV call."""
+    return cv2.cvtColor(np.array([[_OUTSIDE]], np.uint8), cv2.COLOR_RGB2LAB)[0, 0].astype(np.float32)
 
 
 def _grid() -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +168,7 @@ def frame_edges(view: np.ndarray, asphalt: Asphalt, line_gap_m: float = 0.0) -> 
     road = cv2.blur(_asphalt(view, asphalt).astype(np.float32), (SMOOTH_COLUMNS, 1)) > 0.5
     if line_gap_m > 0:
         road = _close_lines(road, view, asphalt, line_gap_m)
-    outside = np.all(view == _OUTSIDE_LAB, axis=-1)
+    outside = np.all(view == _outside_lab(), axis=-1)
     centre = len(xs) // 2
     lefts: list[float] = []
     rights: list[float] = []

@@ -1,4 +1,4 @@
-"""Any policy as a driver of the simulator's own runs, so that every policy is scored as ``rbc eval`` scores a model.
+"""Every policy as a driver of the simulator's own runs, so that every policy is scored as ``rbc eval`` scores a model.
 
 A policy here is an ONNX steering model (behavioral cloning, DAgger: ``rbc eval``'s own in-process driver,
 :class:`tools.sim.driving.drivers.OnnxDriver`, unchanged), a Stable-Baselines3 policy trained on
@@ -26,7 +26,7 @@ import json
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -92,11 +92,17 @@ def ppo_env_config(run: str | Path) -> DriveEnvConfig:
     return config
 
 
+class Predictor(Protocol):
+    """What SB3's policies and algorithms answer: the action for an observation (and any recurrent state)."""
+
+    def predict(self, observation: Observation, *, deterministic: bool = ...) -> tuple[np.ndarray, object]: ...
+
+
 class SB3Driver(LocalDriver):
     """A Stable-Baselines3 policy (anything with SB3's ``predict``) driving the simulator's runs: each frame becomes
     the observation ``rbc/Drive-v0`` made with ``config`` would give, the mean action becomes the command."""
 
-    def __init__(self, policy: Any, config: DriveEnvConfig, law: ControlLaw, speed_unit: str = "mph",
+    def __init__(self, policy: Predictor, config: DriveEnvConfig, law: ControlLaw, speed_unit: str = "mph",
                  name: str = "sb3") -> None:
         from drive_server.serving.preprocess import jpeg_reduction
 

@@ -183,6 +183,11 @@ class Runner:
 
     def _start(self, workers: int) -> Any:
         """The execution engine (here a local process pool); a backend subclass starts its own."""
+        import cv2
+
+        # OpenCV's thread pool, once started in this process, hangs a forked worker in its first parallel call;
+        # one thread here leaves the workers nothing to inherit (they run one thread each anyway)
+        cv2.setNumThreads(1)
         return ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_worker)
 
     def _launch(self, task: Task) -> Future[EvalRun]:

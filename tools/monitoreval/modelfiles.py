@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from protocol.errors import BadValue
+
+if TYPE_CHECKING:
+    import onnx
 
 #: The two halves of a mirror-averaged graph (``rbc mirror``): f(x) and f(x mirrored); steering = (a - b) / 2.
 MIRROR_HALVES = ("rbc_mirror_first", "rbc_mirror_second")
@@ -64,7 +67,7 @@ def check_checkpoint(served: Path, checkpoint: Path) -> None:
         raise BadValue(f"checkpoint {name}: trained for the {model_rig(checkpoint)} camera, {Path(served).name} for "
                        f"the {model_rig(served)} camera", hint)
 
-    def mirrored(proto: Any) -> bool:
+    def mirrored(proto: onnx.ModelProto) -> bool:
         return set(MIRROR_HALVES) <= {out for node in proto.graph.node for out in node.output}
 
     if mirrored(a.proto) != mirrored(b.proto):

@@ -212,6 +212,9 @@ def drive_all(specs: list[RunSpec], model: Path, modes: tuple[str, ...], out: Pa
         for key, (spec, path, mode) in todo.items():
             finished(key, drive(spec, path, mode, shadows))
     else:
+        import cv2
+
+        cv2.setNumThreads(1)  # a forked worker hangs in OpenCV's thread pool if this process started one
         context = multiprocessing.get_context("fork" if hasattr(os, "fork") else "spawn")
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
             futures = {pool.submit(drive, spec, path, mode, shadows): key for key, (spec, path, mode) in todo.items()}
