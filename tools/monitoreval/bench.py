@@ -54,6 +54,7 @@ class EvalPlan:
 def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
     from drive_server.serving.model import SteeringModel
     from tools.monitoreval.cost import monitor_cost
+    from tools.monitoreval.insample import in_sample, markdown
     from tools.monitoreval.modelfiles import check_checkpoint, file_digest
     from tools.monitoreval.report import closed_loop, compare, figures, sweep, table_rows, tables
     from tools.monitoreval.runner import drive_all
@@ -93,13 +94,15 @@ def evaluate(plan: EvalPlan, progress: Callable[[int, int, str], None] | None = 
                             {n: m.score for n, m in shadow_specs.items()}),
         "sweep": sweep(results, plan.rules, {None: (spec.score, spec),
                                              **{n: (m.score, m) for n, m in shadow_specs.items()}}),
+        "in_sample": in_sample(results, plan.rules, {None: (spec.score, spec.window),
+                                                     **{n: (m.score, m.window) for n, m in shadow_specs.items()}}),
         "shadow_specs": {n: {"score": m.score, "warn": m.warn, "alarm": m.alarm, "window": m.window,
                              "calibration": m.calibration} for n, m in shadow_specs.items()},
         "cost": monitor_cost(plan.model, plan.cost_log) if plan.cost_log is not None else None,
     }
     record["rows"] = table_rows(record)
     write_json(plan.out / RECORD, record)
-    write_text(plan.out / TABLES, tables(record))
+    write_text(plan.out / TABLES, tables(record) + markdown(record))
     return record
 
 

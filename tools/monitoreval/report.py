@@ -100,9 +100,9 @@ def compare(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
                          *[(labels.get(n, n), [replayed(s, r, r["shadows"][n], spec) for s, r in warn])
                            for n, spec in shadows.items()]]:
         f = score(traces, rules)
-        out.append({"monitor": name, "r1": _pct(f.recall_at["1"]), "r2": _pct(f.recall_at["2"]),
-                    "r3": _pct(f.recall_at["3"]), "r46": _pct(f.recall_4_6), "f3": f"{f.f3_1_3:.2f}",
-                    "lead1": _pct(f.lead_recall_at["1"]),
+        out.append({"monitor": name, "r1": pct(f.recall_at["1"]), "r2": pct(f.recall_at["2"]),
+                    "r3": pct(f.recall_at["3"]), "r46": pct(f.recall_4_6), "f3": f"{f.f3_1_3:.2f}",
+                    "lead1": pct(f.lead_recall_at["1"]),
                     "false": f"{f.false_per_hour:.2f} ({f.false_per_hour_upper95:.2f})", "figures": f.to_dict()})
     return out
 
@@ -135,8 +135,8 @@ def sweep(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scoring
                                  ("calibrated", spec.warn)):
             f = score([_at_threshold(s, r, name, threshold, spec.window) for s, r in warn], rules)
             out.append({"monitor": label, "threshold": f"{threshold:.4g} ({which})",
-                        "r123": " / ".join(_pct(f.recall_at[k]) for k in ("1", "2", "3")),
-                        "lead1": _pct(f.lead_recall_at["1"]), "f3": f"{f.f3_1_3:.2f}",
+                        "r123": " / ".join(pct(f.recall_at[k]) for k in ("1", "2", "3")),
+                        "lead1": pct(f.lead_recall_at["1"]), "f3": f"{f.f3_1_3:.2f}",
                         "false": f"{f.false_per_hour:.2f} ({f.false_per_hour_upper95:.2f})"})
     return out
 
@@ -153,7 +153,7 @@ def figures(results: Sequence[tuple[RunSpec, str, dict[str, Any]]], rules: Scori
             "failed_monitors": sum(1 for _, m, r in results if r.get("monitor_failed"))}
 
 
-def _pct(x: float | None) -> str:
+def pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.1f} %"
 
 
@@ -162,10 +162,10 @@ def tables(record: dict[str, Any]) -> str:
     lines = ["### Like for like: the anchors' protocol (one-second slices, nominal windows as negatives)", "",
              "| monitor | recall 1 s | recall 2 s | recall 3 s | recall 4-6 s | F3 1-3 s |",
              "|---|---|---|---|---|---|",
-             f"| ours: {record['monitor']['score']} | {_pct(f['recall_at']['1'])} | {_pct(f['recall_at']['2'])} | "
-             f"{_pct(f['recall_at']['3'])} | {_pct(f['recall_4_6'])} | {f['f3_1_3']:.3f} |"]
+             f"| ours: {record['monitor']['score']} | {pct(f['recall_at']['1'])} | {pct(f['recall_at']['2'])} | "
+             f"{pct(f['recall_at']['3'])} | {pct(f['recall_4_6'])} | {f['f3_1_3']:.3f} |"]
     for a in ANCHORS:
-        lines.append(f"| {a.monitor} (published) | {_pct(a.recall_1)} | {_pct(a.recall_2)} | {_pct(a.recall_3)} | - | "
+        lines.append(f"| {a.monitor} (published) | {pct(a.recall_1)} | {pct(a.recall_2)} | {pct(a.recall_3)} | - | "
                      f"{a.f3 if a.f3 is not None else '-'} |")
     lead, p10 = f["lead_median_s"], f["lead_p10_s"]
     lines += ["", f"{f['misbehaviours']} misbehaviours ({f['undetectable']['3']} with too little history for the 3 s "
@@ -173,9 +173,9 @@ def tables(record: dict[str, Any]) -> str:
               f"{f['false_windows']} with a warning.", "",
               "### For deployment: episodes, lead and false alarms", "",
               "| figure | value |", "|---|---|",
-              f"| recall with a lead of at least 1 / 2 / 3 s | {_pct(f['lead_recall_at']['1'])} / "
-              f"{_pct(f['lead_recall_at']['2'])} / {_pct(f['lead_recall_at']['3'])} |",
-              f"| precision of episodes (followed by a misbehaviour within 10 s) | {_pct(f['lead_precision'])} |",
+              f"| recall with a lead of at least 1 / 2 / 3 s | {pct(f['lead_recall_at']['1'])} / "
+              f"{pct(f['lead_recall_at']['2'])} / {pct(f['lead_recall_at']['3'])} |",
+              f"| precision of episodes (followed by a misbehaviour within 10 s) | {pct(f['lead_precision'])} |",
               f"| median / p10 lead of the first episode | "
               f"{'-' if lead is None else f'{lead:.1f} s'} / "
               f"{'-' if p10 is None else f'{p10:.1f} s'} |",
@@ -186,7 +186,7 @@ def tables(record: dict[str, Any]) -> str:
         lines += ["", "### Closed loop: `--monitor act` against `warn` (which drives exactly like `off`)", "",
                   "| figure | warn | act |", "|---|---|---|",
                   f"| misbehaviours on the {c['failing_runs']} failing runs | {c['misbehaviours_off']} | "
-                  f"{c['misbehaviours_act']} ({_pct(c['prevented'])} prevented) |",
+                  f"{c['misbehaviours_act']} ({pct(c['prevented'])} prevented) |",
                   f"| stuck or wrong-way take-overs there | {c['stuck_or_wrong_way_off']} | "
                   f"{c['stuck_or_wrong_way_act']} |"]
         for key, label, unit in (("eta", "degree of autonomy, nominal", " %"), ("lap_time_s", "lap time, nominal",
@@ -220,19 +220,19 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
         return "-" if x is None else f"{x:.1f} s"
 
     anchors = [{"monitor": f"ours: {record['monitor']['score']}, thresholds from other runs",
-                "r1": _pct(f["recall_at"]["1"]), "r2": _pct(f["recall_at"]["2"]), "r3": _pct(f["recall_at"]["3"]),
-                "r46": _pct(f["recall_4_6"]),
+                "r1": pct(f["recall_at"]["1"]), "r2": pct(f["recall_at"]["2"]), "r3": pct(f["recall_at"]["3"]),
+                "r46": pct(f["recall_4_6"]),
                 "f3": f"{f['f3_1_3']:.2f}"}]
-    anchors += [{"monitor": f"{a.monitor} (published, in-sample)", "r1": _pct(a.recall_1), "r2": _pct(a.recall_2),
-                 "r3": _pct(a.recall_3), "r46": "77.0 %" if a.monitor.startswith("SelfOracle") else "-",
+    anchors += [{"monitor": f"{a.monitor} (published, in-sample)", "r1": pct(a.recall_1), "r2": pct(a.recall_2),
+                 "r3": pct(a.recall_3), "r46": "77.0 %" if a.monitor.startswith("SelfOracle") else "-",
                  "f3": "-" if a.f3 is None else f"{a.f3:.2f}"} for a in ANCHORS]
     deployment = [
         {"figure": "misbehaviours (runs with warn)", "value": f"{f['misbehaviours']}"},
         {"figure": "recall at a lead of at least 1 / 2 / 3 s",
-         "value": " / ".join(_pct(f["lead_recall_at"][k]) for k in ("1", "2", "3"))},
+         "value": " / ".join(pct(f["lead_recall_at"][k]) for k in ("1", "2", "3"))},
         {"figure": "median / p10 lead of the first warning",
          "value": f"{s(f['lead_median_s'])} / {s(f['lead_p10_s'])}"},
-        {"figure": "warning episodes followed by a misbehaviour within 10 s", "value": _pct(f["lead_precision"])},
+        {"figure": "warning episodes followed by a misbehaviour within 10 s", "value": pct(f["lead_precision"])},
         {"figure": "false episodes per hour of held-out nominal driving (95 % bound)",
          "value": f"{f['false_per_hour']:.2f} ({f['false_per_hour_upper95']:.2f}) over {f['nominal_hours']:.1f} h"},
     ]
@@ -240,7 +240,7 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
     if c:
         closed.append({"figure": f"misbehaviours on the {c['failing_runs']} perturbed and degraded runs",
                        "warn": f"{c['misbehaviours_off']}",
-                       "act": f"{c['misbehaviours_act']} ({_pct(c['prevented'])} prevented)"})
+                       "act": f"{c['misbehaviours_act']} ({pct(c['prevented'])} prevented)"})
         closed.append({"figure": "stuck or wrong-way take-overs there", "warn": f"{c['stuck_or_wrong_way_off']}",
                        "act": f"{c['stuck_or_wrong_way_act']}"})
         for key, label, unit in (("eta", "degree of autonomy, held-out nominal", " %"),
@@ -256,7 +256,8 @@ def table_rows(record: dict[str, Any]) -> dict[str, list[dict[str, str]]]:
                  for name, key in (("off", "off"), ("on (act)", "on"), ("added", "added"))]
     return {"anchors": anchors, "deployment": deployment, "closed_loop": closed, "cost": costs,
             "sweep": record.get("sweep", []),
-            "monitors": [{k: v for k, v in row.items() if k != "figures"} for row in record.get("monitors", [])]}
+            "monitors": [{k: v for k, v in row.items() if k != "figures"} for row in record.get("monitors", [])],
+            "in_sample": [{k: v for k, v in row.items() if k != "figures"} for row in record.get("in_sample", [])]}
 
 
 #: The tables of the benchmark's results record (``results/monitor-eval.json``), over ``runs.0.output.rows``.
@@ -264,6 +265,11 @@ RESULT_TABLES = {
     "anchors": {"rows": "runs.0.output.rows.anchors",
                 "columns": [["monitor", "{monitor}"], ["recall 1 s", "{r1}"], ["recall 2 s", "{r2}"],
                             ["recall 3 s", "{r3}"], ["recall 4-6 s", "{r46}"], ["F3 1-3 s", "{f3}"]]},
+    "anchors-protocol": {"rows": "runs.0.output.rows.in_sample", "caption": "short",
+                         "columns": [["monitor", "{monitor}"], ["threshold", "{threshold}"],
+                                     ["recall 1 / 2 / 3 s", "{r1} / {r2} / {r3}"], ["recall 4-6 s", "{r46}"],
+                                     ["precision 1-3 s", "{p13}"], ["F3 1-3 s", "{f3}"],
+                                     ["nominal windows alarmed", "{nominal_alarmed}"]]},
     "monitors": {"rows": "runs.0.output.rows.monitors", "caption": "short",
                  "columns": [["monitor", "{monitor}"], ["recall 1 / 2 / 3 s", "{r1} / {r2} / {r3}"],
                              ["recall 4-6 s", "{r46}"], ["F3", "{f3}"], ["lead >= 1 s", "{lead1}"],
