@@ -48,8 +48,8 @@ class Level(IntEnum):
 class MonitorPolicy:
     """How the server uses the monitor. The defaults are defined here once; the CLI's flags read them."""
 
-    # off by default: on the benchmark and on real recordings neither bundled monitor foresaw a failure, and
-    # scoring every frame costs unity.onnx's pipeline about 0.5 ms (docs/results.md); a user asks for it
+    # off by default: on the benchmark the best monitor warned a second ahead of under a third of the failures and
+    # on real recordings the bundled one of none, and scoring every frame costs time (docs/results.md)
     mode: MonitorMode = MonitorMode.OFF
     slow_factor: float = 0.5  # on a warning (act), the control law's speed limit times this
     release_frames: int = FRAMES_PER_SECOND  # frames below the warning threshold before handing back
