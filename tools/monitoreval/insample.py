@@ -20,7 +20,7 @@ import numpy as np
 
 from tools.monitoreval.report import pct, trace
 from tools.monitoreval.runset import RunSpec
-from tools.monitoreval.scoring import RunTrace, ScoringRules, score
+from tools.monitoreval.scoring import RunTrace, ScoringRules, nominal_stretches, score
 
 #: The standard normal's 95 % quantile: the anchors' confidence (SelfOracle's and ThirdEye's gamma quantile).
 _Z95 = 1.6448536269514722
@@ -32,7 +32,7 @@ def gamma_quantile_95(values: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     if x.size < 2:
         raise ValueError("a gamma fit needs at least 2 finite values")
-    x = np.maximum(x, max(float(x[x > 0].min()) if np.any(x > 0) else 1e-12, 1e-12) * 1e-3)  # log needs x > 0
+    x = np.maximum(x, 1e-3 * float(x[x > 0].min()) if np.any(x > 0) else 1e-15)  # the log needs x > 0
     mean = float(x.mean())
     s = math.log(mean) - float(np.log(x).mean())
     if s <= 1e-12:  # all equal: no spread to fit
@@ -53,13 +53,10 @@ def window_means(values: Sequence[float], window: int) -> np.ndarray:
 
 
 def _nominal_frames(run: RunTrace, rules: ScoringRules) -> np.ndarray:
-    """The frames of a nominal run that the false-positive windows cover: settled, and not within the horizon
-    before a take-over."""
+    """The frames of a nominal run that the false-positive windows cover (:func:`nominal_stretches`)."""
     keep = np.zeros(run.t.size, dtype=bool)
-    bounds = [0.0, *[w for w, _ in run.takeovers], run.sim_time_s]
-    for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
-        end = b - rules.horizon_s if k < len(run.takeovers) else b
-        keep |= (run.t >= a + rules.settle_s) & (run.t < end)
+    for start, end in nominal_stretches(run, rules):
+        keep |= (run.t >= start) & (run.t < end)
     return keep
 
 
@@ -91,11 +88,12 @@ def in_sample(results: Sequence[tuple[RunSpec, str, Mapping[str, object]]], rule
     """One row per monitor, scored by the anchors' protocol on the ``warn`` drives. ``monitors``: shadow name
     (None: the driving monitor, whose stored one-second means are used) -> (label, its window in frames)."""
     warn = [(s, r) for s, m, r in results if m == "warn"]
+    traces = [trace(s, dict(r)) for s, r in warn]
+    masks = [_nominal_frames(t, rules) if t.group == "nominal" else None for t in traces]
     rows: list[InSampleRow] = []
     for name, (label, window) in monitors.items():
         means = [_scores(r, name, window) for _, r in warn]
-        traces = [trace(s, dict(r)) for s, r in warn]
-        nominal = [m[_nominal_frames(t, rules)] for t, m in zip(traces, means, strict=True) if t.group == "nominal"]
+        nominal = [m[k] for k, m in zip(masks, means, strict=True) if k is not None]
         if not nominal or sum(v.size for v in nominal) < 2:
             continue
         threshold = gamma_quantile_95(np.concatenate(nominal))

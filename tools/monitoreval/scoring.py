@@ -114,14 +114,19 @@ def _slice_hit(run: RunTrace, when: float, k: int, history: float, rules: Scorin
     return bool(np.any(run.level[inside] >= rules.level))
 
 
-def nominal_windows(run: RunTrace, rules: ScoringRules) -> tuple[int, int]:
-    """(one-second windows, windows with a prediction) of a nominal run: settled stretches only, and none of the
-    ``horizon_s`` before a take-over (a warning there foresaw a real failure: not a false alarm)."""
-    total = hit = 0
+def nominal_stretches(run: RunTrace, rules: ScoringRules) -> list[tuple[float, float]]:
+    """(start, end) of the stretches of a nominal run that count as nominal driving: ``settle_s`` after the start
+    and after each take-over, and none of the ``horizon_s`` before a take-over (a warning there foresaw a real
+    failure: not a false alarm)."""
     bounds = [0.0, *[w for w, _ in run.takeovers], run.sim_time_s]
-    for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
-        start = a + rules.settle_s
-        end = b - rules.horizon_s if k < len(run.takeovers) else b
+    return [(a + rules.settle_s, b - rules.horizon_s if k < len(run.takeovers) else b)
+            for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True))]
+
+
+def nominal_windows(run: RunTrace, rules: ScoringRules) -> tuple[int, int]:
+    """(one-second windows, windows with a prediction) of a nominal run, over its :func:`nominal_stretches`."""
+    total = hit = 0
+    for start, end in nominal_stretches(run, rules):
         for lo in np.arange(start, end - 1.0 + 1e-9, 1.0):
             inside = (run.t >= lo) & (run.t < lo + 1.0)
             total += 1
