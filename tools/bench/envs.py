@@ -43,7 +43,7 @@ class EnvBenchResult:
     def row(self) -> str:
         wire = "JPEG round trip" if self.jpeg else "rendered frame"
         if self.observation == "model":
-            wire = "64x64 model input"
+            wire = "64x64 model input" if self.jpeg else "64x64, no JPEG"
         peak = "-" if self.peak_rss_mb is None else f"{self.peak_rss_mb:,.0f}"
         return (f"{self.track:<12} {self.cameras} camera{'s' if self.cameras > 1 else ' '}  {wire:<16} "
                 f"{self.wall_steps_per_s:>8,.0f} {self.cpu_steps_per_s:>10,.0f} {self.cpu_ms_per_step:>7.3f} "

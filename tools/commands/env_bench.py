@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     print(HEADER)
     for track in args.tracks:
         for cameras, jpeg, observation in ((1, True, "frame"), (1, False, "frame"), (3, True, "frame"),
-                                           (1, True, "model")):
+                                           (1, True, "model"), (1, False, "model")):
             print(bench_env_isolated(track, cameras, jpeg, args.steps, args.repeats, observation=observation,
                                      threads=args.threads).row(), flush=True)
     if args.worlds:

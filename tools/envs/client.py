@@ -178,8 +178,9 @@ class HeadlessSimClient:
         self._view = _Snapshot(sim.vehicle.state, sim.proj, sim.progress)
 
     # --- looking ------------------------------------------------------------------------------------
-    def render(self) -> dict[str, np.ndarray]:
-        """The cameras' frames (RGB uint8, 160x320) at the car's pose, as the renderer draws them."""
+    def render(self, rows: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
+        """The cameras' frames (RGB uint8, 160x320) at the car's pose, as the renderer draws them (``rows``: only
+        those rows are wanted, the others are left unspecified; see :meth:`Renderer.render`)."""
         sim = self._sim
         st = self._seen.state
         if sim.renderer is None:
@@ -188,7 +189,7 @@ class HeadlessSimClient:
         pose = Pose(st.x + half * math.cos(st.yaw), st.y + half * math.sin(st.yaw), st.yaw)
         pitch, roll = sim.camera_jitter()
         return {cam: sim.renderer.render(pose, camera=cam, light_intensity=sim.config.light_intensity,
-                                         pitch_deg=pitch, roll_deg=roll) for cam in self.cameras}
+                                         pitch_deg=pitch, roll_deg=roll, rows=rows) for cam in self.cameras}
 
     def wire(self, rgb: np.ndarray) -> tuple[np.ndarray, bytes]:
         """A frame as it arrives over the wire: JPEG at the track's quality (75 like Unity's), decoded by THE

@@ -101,6 +101,9 @@ class DriveEnv(gym.Env):
         self.rotation = WorldRotation(config, self.worlds)  # which world each episode drives
         self._episode: Episode | None = None  # this episode's world, light and fog (None: the env's track)
         self._reduce = jpeg_reduction(self.contract)
+        # observation="model" without the JPEG and nothing else looking at the frame: only the rows the model crops
+        whole = config.observation != "model" or config.jpeg or render_mode is not None or config.monitor is not None
+        self._rows = None if whole else (self.contract.crop_top, self.contract.crop_bottom)
 
     # --- the Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -219,7 +222,7 @@ class DriveEnv(gym.Env):
         return spaces.Dict(parts)
 
     def _observe(self) -> tuple[np.ndarray | dict[str, np.ndarray], bytes]:
-        frames = self.client.render()
+        frames = self.client.render(self._rows)
         self._frame = frames["center"]
         seen: dict[str, np.ndarray] = {}
         jpeg = b""

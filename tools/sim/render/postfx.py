@@ -45,6 +45,8 @@ class PostFx:
             n = g.standard_normal((NOISE_TILES, FRAME_HEIGHT + NOISE_PAD, FRAME_WIDTH, 3)) * NOISE_UNIT + 128
             self._tiles = np.clip(np.round(n), 0, 255).astype(np.uint8)
         self._ksize = 3 if look.blur <= 0.8 else 5
+        #: rows beyond a pixel's own that its processed value reads (the blur's reach; the rest is per pixel)
+        self.margin = self._ksize // 2 if look.blur > 0.05 else 0
 
     def apply(self, rgb: np.ndarray) -> np.ndarray:
         """The processed frame (a new array or ``rgb`` changed in place)."""

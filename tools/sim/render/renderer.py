@@ -15,6 +15,7 @@ import numpy as np
 
 from protocol.errors import BadValue
 from protocol.facts import FRAME_HEIGHT, FRAME_WIDTH
+from tools.sim.render.bonnet import ROWS as BONNET_ROWS
 from tools.sim.render.bonnet import bonnet_layer, draw_bonnet
 from tools.sim.render.camera import (
     CAMERA_OFFSETS,
@@ -75,11 +76,14 @@ class Renderer:
         self._lut_cache: dict[float, tuple[np.ndarray, float]] = {}
 
     def render(self, pose: Pose, camera: str = "center", light_intensity: float = 1.0,
-               pitch_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
+               pitch_deg: float = 0.0, roll_deg: float = 0.0, rows: tuple[int, int] | None = None) -> np.ndarray:
         """One RGB frame (160, 320, 3) uint8 from ``camera`` ("center", "left" or "right") of a car at ``pose``.
 
         ``light_intensity`` scales the direct sunlight (1 = the world's default; ambient light stays),
         ``pitch_deg``/``roll_deg`` tilt the camera for this frame (bumps; + = nose up / right side down).
+        ``rows=(top, bottom)``: only the rows ``top:bottom`` are wanted; they are the full frame's bytes, the others
+        are left unspecified (the sky and ground are drawn for those rows alone: a tilted camera's warp reads the
+        whole frame, so with bumps the whole frame is drawn).
         """
         try:
             cam = self.cameras[camera]
@@ -89,12 +93,14 @@ class Renderer:
         fb: np.ndarray = self._fb
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         hr = m.horizon_row
+        top, bottom = self._drawn_rows(rows, pitch_deg or roll_deg)
 
         # sky: panorama column from the absolute azimuth of each pixel
-        if hr > 0:
+        if top < hr:
             shift = np.float32((math.degrees(pose.yaw) % 360.0) * PANO_W / 360.0 + SKY_PAD)
-            cv2.remap(self._sky, cam.sky_x + shift, cam.sky_y, cv2.INTER_LINEAR, dst=fb[:hr],
-                      borderMode=cv2.BORDER_REPLICATE)
+            end = min(hr, bottom)
+            cv2.remap(self._sky, cam.sky_x[top:end] + shift, cam.sky_y[top:end], cv2.INTER_LINEAR,
+                      dst=fb[top:end], borderMode=cv2.BORDER_REPLICATE)
 
         # ground: car-frame points -> texel coordinates of each mip level -> bilinear lookups
         g = self.world.ground
@@ -102,15 +108,22 @@ class Renderer:
         tx = pose.x - g.x0  # the camera offset is already inside ground_xy
         ty = g.y1 - pose.y
         for lvl, a, b, pts in cam.bands:
+            if a < top or b > bottom:  # the band's rows outside the wanted ones are left out
+                if b <= top or a >= bottom:
+                    continue
+                pts = pts[max(a, top) - a:min(b, bottom) - a]
+                a, b = max(a, top), min(b, bottom)
             k = inv / (1 << lvl)
             half = 0.5 - 0.5 / (1 << lvl)  # pyrDown texel centres sit between their parents
             mat = np.array([[c * k, -s * k, tx * k - half], [-s * k, -c * k, ty * k - half]], np.float32)
             maps = cv2.transform(pts, mat)
             cv2.remap(g.mips[lvl], maps, None, cv2.INTER_LINEAR, dst=fb[a:b], borderMode=cv2.BORDER_CONSTANT,
                       borderValue=g.border)
-        if cam.fog_rows:
-            rows = fb[hr:hr + cam.fog_rows]
-            rows[:] = cv2.blendLinear(rows, cam.haze_block, cam.clear, cam.fog)
+        first, end = max(hr, top), min(hr + cam.fog_rows, bottom)
+        if first < end:
+            lo, hi = first - hr, end - hr
+            hazed = fb[first:end]
+            hazed[:] = cv2.blendLinear(hazed, cam.haze_block[lo:hi], cam.clear[lo:hi], cam.fog[lo:hi])
 
         axes = m.axes @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # camera axes, world coordinates
         if pitch_deg or roll_deg:  # a rotated camera sees the same image through a homography
@@ -127,9 +140,21 @@ class Renderer:
         # props, lit for the intensity and seen by the (jittered) camera, straight onto the RGB frame
         pos = np.array([pose.x + c * m.forward - s * m.lateral, pose.y + s * m.forward + c * m.lateral, m.height])
         self.props.draw(out, m, pos, axes, light_intensity)
-        if self._bonnets:  # fixed to the car: drawn after the bumps' warp, before the camera's processing
+        # the bonnet, fixed to the car: drawn after the bumps' warp, before the camera's processing (where wanted)
+        if self._bonnets and bottom > BONNET_ROWS.start:
             draw_bonnet(out, self._bonnets[camera], light_intensity)
         return self.postfx.apply(out) if self.postfx.active else out
+
+    def _drawn_rows(self, rows: tuple[int, int] | None, tilted: float) -> tuple[int, int]:
+        """The rows whose sky and ground are drawn for the wanted ``rows``: all of them for a tilted camera (its warp
+        reads the whole frame), a few more on each side where the camera's processing blurs."""
+        if rows is None or tilted:
+            return 0, FRAME_HEIGHT
+        top, bottom = rows
+        if not 0 <= top < bottom <= FRAME_HEIGHT:
+            raise ValueError(f"rows must be 0 <= top < bottom <= {FRAME_HEIGHT}, got {rows}")
+        margin = self.postfx.margin if self.postfx.active else 0
+        return max(0, top - margin), min(FRAME_HEIGHT, bottom + margin)
 
     def render_all(self, pose: Pose, light_intensity: float = 1.0, pitch_deg: float = 0.0,
                    roll_deg: float = 0.0) -> dict[str, np.ndarray]:

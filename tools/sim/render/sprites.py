@@ -249,9 +249,11 @@ class PropPainter:
                 continue
             cam_xyz = (rail - pos[:2]) @ axes[:, :2].T - pos[2] * up
             front = cam_xyz[:, 2] > NEAR
-            if np.count_nonzero(front) < 2:
+            count = np.count_nonzero(front)
+            if count < 2:
                 continue
-            dist = float(np.median(np.hypot(cam_xyz[front, 0], cam_xyz[front, 2])))
+            d, mid = np.sort(np.hypot(cam_xyz[front, 0], cam_xyz[front, 2])), count // 2  # np.median without its checks
+            dist = float(d[mid]) if count % 2 else float((d[mid - 1] + d[mid]) / 2)
             if dist > self.view_dist:
                 continue
             fog = float(fog_weight(dist, self.fog_density))
