@@ -93,7 +93,7 @@ def test_the_study_on_a_synthetic_two_run_set(tmp_path: Path) -> None:
     assert result["noise_copies"] == [{"run": "train-noise0.3-0", "sigma": 0.3, "seed": 500,
                                        "sha256": file_digest(cached), "matches_cached_copy": True}]
     scores = result["scores"]
-    assert {"autoencoder", "shift", "steer_std", "vs_reference", "vs_twin", "ensemble", "mirror",
+    assert {"carried", "shift", "steer_std", "vs_reference", "vs_twin", "ensemble", "mirror",
             "perturbed"} <= set(scores)
     # a calibration lap is served by the reference itself: its distance to the reference is 0 on every frame, as
     # is a nominal run's; the recreated noisy copy steers otherwise, so every window of its run is above 0
@@ -121,7 +121,7 @@ def test_the_ensemble_monitors_own_score_is_a_candidate_with_two_members_or_more
     served = Served(np.full(n, 0.3), None, np.zeros(n), [])
     one = {"a": np.full(n, 0.1)}
     two = {"a": np.full(n, 0.1), "b": np.full(n, 0.3)}
-    frame = {"autoencoder": np.zeros(n), "reference": served, "served": served}
+    frame = {"carried": np.zeros(n), "reference": served, "served": served}
     assert "ensemble_monitor" not in window_scores({**frame, "others": one})
     assert "ensemble_monitor" not in {c.key for c in candidates(["a"], False, 0, 0.1)}
     # |0.3 - mean(0.1, 0.3)| + std(0.1, 0.3) = 0.1 + 0.1, as rbc monitor fit --score ensemble scores a frame

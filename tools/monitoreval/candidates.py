@@ -37,7 +37,7 @@ class Candidate:
 
 
 def candidates(others: Sequence[str], halves: bool, members: int, sigma: float) -> list[Candidate]:
-    out = [Candidate("autoencoder", "a", "autoencoder error (the bundled monitor)"),
+    out = [Candidate("carried", "a", "the score of the monitor the reference file carries"),
            Candidate("shift", "a", "shift disagreement of the served model"),
            Candidate("steer_abs", "b", "|steering| (reference)"),
            Candidate("steer_std", "b", "steering std over 1 s (reference)"),
@@ -74,14 +74,19 @@ class _Net:
         options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
         options.log_severity_level = 3
         self.session = ort.InferenceSession(graph, options, providers=["CPUExecutionProvider"])
-        self.input = self.session.get_inputs()[0].name
+        self.input, *rest = [i.name for i in self.session.get_inputs()]
+        self.steering_input = rest[0] if rest else None  # an ensemble monitor's served steering (batch, 1)
         self.outputs = [o.name for o in self.session.get_outputs()]
 
-    def run(self, inputs: np.ndarray, batch: int = 256) -> dict[str, np.ndarray]:
+    def run(self, inputs: np.ndarray, steering: np.ndarray | None = None, batch: int = 256) -> dict[str, np.ndarray]:
         parts: dict[str, list[np.ndarray]] = {name: [] for name in self.outputs}
         for start in range(0, len(inputs), batch):
             x = inputs[start:start + batch].astype(np.float32) / 255.0 - 0.5  # failures.FailureRun.floats
-            for name, value in zip(self.outputs, self.session.run(None, {self.input: x}), strict=True):
+            feed = {self.input: x}
+            if self.steering_input is not None:
+                assert steering is not None, "a graph that takes the served steering"
+                feed[self.steering_input] = np.asarray(steering[start:start + batch], np.float32).reshape(-1, 1)
+            for name, value in zip(self.outputs, self.session.run(None, feed), strict=True):
                 parts[name].append(np.asarray(value, np.float64).reshape(-1))
         return {name: np.concatenate(v) if v else np.zeros(0) for name, v in parts.items()}
 
@@ -148,7 +153,7 @@ def _change(x: np.ndarray) -> np.ndarray:
 
 def window_scores(frame: dict[str, Any], window: int = FRAMES_PER_SECOND) -> dict[str, np.ndarray]:
     """Every candidate's one-second score at every frame of one stretch of driving, from its per-frame answers:
-    ``autoencoder``, ``reference`` and ``served`` (:class:`Served`), ``others`` (name -> steering)."""
+    ``carried``, ``reference`` and ``served`` (:class:`Served`), ``others`` (name -> steering)."""
     ref: Served = frame["reference"]
     served: Served = frame["served"]
     others: dict[str, np.ndarray] = frame["others"]
@@ -156,7 +161,7 @@ def window_scores(frame: dict[str, Any], window: int = FRAMES_PER_SECOND) -> dic
     def mean(x: np.ndarray) -> np.ndarray:
         return window_means(x, window)
 
-    out = {"autoencoder": mean(frame["autoencoder"]), "shift": mean(served.shift),
+    out = {"carried": mean(frame["carried"]), "shift": mean(served.shift),
            "steer_abs": mean(np.abs(ref.steer)), "steer_std": window_std(ref.steer, window),
            "steer_change": mean(_change(ref.steer)),
            "served_abs": mean(np.abs(served.steer)), "served_std": window_std(served.steer, window),
@@ -184,7 +189,7 @@ def slice_answers(frame: dict[str, Any], a: int, b: int) -> dict[str, Any]:
         return Served(s.steer[a:b], None if s.halves is None else (s.halves[0][a:b], s.halves[1][a:b]),
                       s.shift[a:b], [m[a:b] for m in s.members])
 
-    return {"autoencoder": frame["autoencoder"][a:b], "reference": cut(frame["reference"]),
+    return {"carried": frame["carried"][a:b], "reference": cut(frame["reference"]),
             "served": cut(frame["served"]), "others": {k: v[a:b] for k, v in frame["others"].items()}}
 
 
@@ -211,10 +216,10 @@ class Study:
         steering = SteeringModel(self.model)
         found = steering.monitor()
         if found is None:
-            raise BadValue(f"{self.model.name} carries no monitor: the study scores its autoencoder")
+            raise BadValue(f"{self.model.name} carries no monitor: the study scores the one it carries")
         self.contract = steering.contract
         self.digest = file_digest(self.model)
-        self.autoencoder = _Net(found[1].model_bytes, self.threads)
+        self.carried = _Net(found[1].model_bytes, self.threads)
         self.others: dict[str, _Net] = {}  # same-contract model files by stem
         self.contracts: dict[str, str] = {}  # every other model file: "same" or its contract
         for path in sorted((self.others_folder or self.model.parent).glob("*.onnx")):
@@ -260,7 +265,8 @@ class Study:
             served = reference
         else:
             served = Scorer(path, self.members, self.member_sigma, self.scratch, self.threads)(run.inputs)
-        return {"autoencoder": self.autoencoder.run(run.inputs)["score"], "reference": reference, "served": served,
+        carried = self.carried.run(run.inputs, served.steer)[self.carried.outputs[0]]
+        return {"carried": carried, "reference": reference, "served": served,
                 "others": {k: net.run(run.inputs)[net.outputs[0]] for k, net in self.others.items()}}
 
     def close(self) -> None:

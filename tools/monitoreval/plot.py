@@ -33,7 +33,7 @@ def plot_run(driver: OnnxDriver, result: RunResult, path: Path, title: str = "",
     t = np.array([w for w, _ in driver.readings])
     mean = np.array([r.mean if r is not None else np.nan for _, r in driver.readings])
     level = np.array([int(r.level) if r is not None else 0 for _, r in driver.readings])
-    fig, ax = plt.subplots(figsize=(9, 3.8), dpi=110)
+    fig, ax = plt.subplots(figsize=(9, 4.2), dpi=110)
     for value, color in ((1, "#ffd23f"), (2, "#f25f5c")):
         on = level == value
         ax.fill_between(t, 0, 1, where=on, transform=ax.get_xaxis_transform(), color=color, alpha=0.25, lw=0,
@@ -46,14 +46,21 @@ def plot_run(driver: OnnxDriver, result: RunResult, path: Path, title: str = "",
         for intervention in lap.interventions:
             ax.axvline(intervention.t, color="grey", lw=0.6, alpha=0.6)
     span = float(t.max() - t.min()) if t.size else 1.0
+    marks = first_warning_leads(run_trace(driver, result), rules)
+    rows: list[int] = []
     placed: list[float] = []  # the latest label's time in each row: a label too close to one drops a row
-    for when, cause, lead in first_warning_leads(run_trace(driver, result), rules):
-        ax.axvline(when, color="black", lw=1.3)
-        label = f"{cause.replace('_', ' ')}" + (f"\n{lead:.1f} s ahead" if lead is not None else "\nmissed")
+    for when, _, _ in marks:
         row = next((k for k, last in enumerate(placed) if when - last > LABEL_WIDTH * span), len(placed))
         placed[row:row + 1] = [when]
-        ax.annotate(label, (when, top), xytext=(3, -2 - 20 * (row % 3)), textcoords="offset points", fontsize=7,
-                    va="top", bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
+        rows.append(row)
+    # Room above the curve for the labels' rows (each about a tenth of the axes' height), so none hides another.
+    ax.set_ylim(0, max(top, spec.alarm) * 1.05 / max(0.3, 1 - 0.11 * len(placed)))
+    for (when, cause, lead), row in zip(marks, rows, strict=True):
+        ax.axvline(when, color="black", lw=1.3)
+        label = f"{cause.replace('_', ' ')}" + (f"\n{lead:.1f} s ahead" if lead is not None else "\nmissed")
+        ax.annotate(label, (when, 1), xycoords=("data", "axes fraction"), xytext=(3, -3 - 21 * row),
+                    textcoords="offset points", fontsize=7, va="top",
+                    bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
         if lead is not None:
             ax.annotate("", xy=(when, spec.alarm), xytext=(when - lead, spec.alarm),
                         arrowprops={"arrowstyle": "<->", "color": "black", "lw": 1})

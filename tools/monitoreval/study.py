@@ -9,13 +9,14 @@ AUC of positive against negative windows, and the benchmark's recall at 1, 2 and
 :mod:`tools.monitoreval.scoring`) at a threshold at the 99th percentile of the calibration laps' windows (their
 stretches away from take-overs, as ``rbc monitor fit`` calibrates).
 
-The candidates: (a) the bundled monitor's autoencoder error and the served model's shift disagreement; (b) the
-steering itself (its size, its spread over a second, its change from frame to frame), of the reference model and
-of the served one; (c) for a run driven by a weight-noised copy (:func:`tools.monitoreval.modelfiles.degraded_model`,
-recreated from the run's sigma and seed), the served steering's distance to the reference model, to the
-reference's network without its mirror average, and to every other model file of the same input contract; (d) an
-ensemble's spread: of the same-contract models if there are any, of the served model's two mirrored halves, and of
-the served model beside copies of it with a little weight noise. A calibration lap's served model is the reference.
+The candidates: (a) the score of the monitor the reference file carries (when the study was run: the autoencoder)
+and the served model's shift disagreement; (b) the steering itself (its size, its spread over a second, its change
+from frame to frame), of the reference model and of the served one; (c) for a run driven by a weight-noised copy
+(:func:`tools.monitoreval.modelfiles.degraded_model`, recreated from the run's sigma and seed), the served
+steering's distance to the reference model, to the reference's network without its mirror average, and to every
+other model file of the same input contract; (d) an ensemble's spread: of the same-contract models if there are any,
+of the served model's two mirrored halves, and of the served model beside copies of it with a little weight noise. A
+calibration lap's served model is the reference.
 
     python -m tools.monitoreval.study --failures DIR --calibration DIR --json OUT
 

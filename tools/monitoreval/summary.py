@@ -40,8 +40,8 @@ def monitor_summary(driver: OnnxDriver, result: RunResult, rules: ScoringRules =
     # the take-overs a monitor can foresee: off the road, into a cone, a spin-out (MISBEHAVIOUR_CAUSES)
     text = f"take-overs foreseen: {len(foreseen)} of {len(found)}"
     if foreseen:
-        text += " (lead " + ", ".join(f"{lead:.1f} s" for *_, lead in foreseen) + ")"
+        text += " (leads " + ", ".join(f"{lead:.1f}" for *_, lead in foreseen) + " s)"
     skipped = sum(1 for _, c in trace.takeovers if c in MISBEHAVIOUR_CAUSES) - len(found)
     if skipped:
-        text += f"; {skipped} more within {rules.settle_s:g} s of the one before"
+        text += f"; {skipped} more within {rules.settle_s:g} s of another"
     return f"{head}\n{text}"
