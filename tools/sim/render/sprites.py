@@ -220,7 +220,7 @@ class PropPainter:
         rad = scale * self.crown[sel] / z
         centre = px[:, 4]
         crown = [((int(c[0]), int(c[1])), int(r)) for c, r in zip(centre.tolist(), rad.tolist(), strict=True)]
-        hi = np.round(centre + sun2 * (0.3 * rad)[:, None]).astype(np.int64).tolist()
+        nudge = 0.3 * rad  # the highlights' offsets, worked out for the few near broadleaves that have one
         lit_right = bool(sun2[0] > 0)
         recipe = (self.kind[sel] * 4 + (z < LOD_DIST) * 2 + int(lit_right)).tolist()
         min_hi = 3 << SHIFT
@@ -234,7 +234,8 @@ class PropPainter:
                 elif shape == CROWN:
                     cv2.circle(img, crown[i][0], crown[i][1], c[slot], -1, cv2.LINE_AA, SHIFT)
                 elif crown[i][1] > min_hi:
-                    cv2.circle(img, tuple(hi[i]), int(crown[i][1] * 0.68), c[slot], -1, cv2.LINE_AA, SHIFT)
+                    hi = np.round(centre[i] + sun2 * nudge[i]).astype(np.int64).tolist()
+                    cv2.circle(img, tuple(hi), int(crown[i][1] * 0.68), c[slot], -1, cv2.LINE_AA, SHIFT)
 
     def _draw_rails(self, fb: np.ndarray, cam: CameraModel, pos: np.ndarray, axes: np.ndarray, intensity: float,
                     haze: np.ndarray) -> None:
