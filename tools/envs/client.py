@@ -88,9 +88,10 @@ class HeadlessSimClient:
         config = self.base
         track = get_track(config.track)
         cones = place_cones(track, config.cones, config.cone_seed) if config.cones else None
-        get_world(track, config.light_direction_deg, cones)  # the world Simulation(config) asks for
+        # the world Simulation(config) asks for; without cones its albedo goes as it is lit (no other world needs it)
+        get_world(track, config.light_direction_deg, cones, keep_albedo=bool(config.cones))
         if not config.cones:
-            release_albedo(track)
+            release_albedo(track, trim=True)
 
     @property
     def track_length_m(self) -> float:

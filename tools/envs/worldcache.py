@@ -11,7 +11,6 @@ timing: timing changes when a world is built, not which.
 from __future__ import annotations
 
 import copy
-import ctypes
 import os
 import tempfile
 import threading
@@ -90,37 +89,31 @@ def build_world(key: WorldKey) -> BuiltWorld:
     with _BUILD_LOCK:
         track = get_track(path)
         cones = place_cones(track, key.cones, key.cone_seed) if key.cones else None
-        built = BuiltWorld(path, World(track, key.sun_deg, cones))
-        if not key.cones:
-            _forget_albedo(track)
+        built = BuiltWorld(path, World(track, key.sun_deg, cones, keep_albedo=bool(key.cones)))
+        if not key.cones:  # the build let the albedo go (see release_albedo)
+            _trim_heap()
         return built
 
 
-def release_albedo(track: Track) -> None:
+def release_albedo(track: Track, trim: bool = False) -> None:
     """Drop the ground albedo the renderer cached while building ``track``'s world (128 MB for the lake; the built
-    world keeps only its lit texture). Done after every world built without cones: with cones each layout is a
-    world of its own, painted on the same albedo, so it stays; another sun for a track paints it again (about a
-    second, once per world built)."""
-    with _BUILD_LOCK:
-        _forget_albedo(track)
-
-
-def _forget_albedo(track: Track) -> None:
+    world keeps only its lit texture), and give the heap back (``trim``: also where the build let it go itself,
+    ``keep_albedo=False``). Done after every world built without cones: with cones each layout is a world of its
+    own, painted on the same albedo, so it stays; another sun for a track paints it again (about a second, once
+    per world built)."""
     from tools.sim.render.world import forget_albedo
 
-    if forget_albedo(track):
-        _trim_heap()
+    with _BUILD_LOCK:
+        if forget_albedo(track) or trim:
+            _trim_heap()
 
 
 def _trim_heap() -> None:
-    """Give the C heap's free memory back to the system (glibc; elsewhere nothing). A world's build frees hundreds
-    of MB of temporaries below glibc's raised mmap threshold, which stay in the process (57 MB of the lake's)."""
-    try:
-        libc = ctypes.CDLL(None)
-        trim = libc.malloc_trim
-    except (OSError, AttributeError):
-        return
-    trim(0)
+    """Give the C heap's free memory back to the system (:func:`tools.sim.render.world.trim_heap`): a world's build
+    frees hundreds of MB of temporaries below glibc's raised mmap threshold, which stay in the process."""
+    from tools.sim.render.world import trim_heap
+
+    trim_heap()
 
 
 def with_fog(world: World, factor: float) -> World:

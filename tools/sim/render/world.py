@@ -13,9 +13,12 @@ with ``direct`` following Lambert's law for the flat ground.
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import logging
 import math
+import mmap
+import sys
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, replace
@@ -84,7 +87,11 @@ class World:
     Use :func:`get_world` to share worlds (and their ~0.3 GB of textures) between renderers.
     """
 
-    def __init__(self, track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None) -> None:
+    def __init__(self, track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None,
+                 keep_albedo: bool = True) -> None:
+        """``keep_albedo=False``: the track's ground albedo leaves the cache and its memory goes back to the system
+        band by band as it is lit (the same bytes; the peak is the lit texture's, not both at once), for a world
+        that is the only one its process builds on the track (the albedo is painted again for another)."""
         t0 = time.perf_counter()
         self.track = track
         self.light_direction_deg = float(light_direction_deg)
@@ -96,8 +103,11 @@ class World:
         self.props: Props = replace(base, cones=_cone_array(cones))
         self.haze = haze_colour(track.scenery.theme, track.sky)
         shadow = _shadow_map(albedo, self.props, self.sun)
-        self.ground = light_ground(albedo, shadow, self.ambient, self.direct)
         self.sun_visibility = _prop_visibility(self.props, shadow, albedo, self.sun)
+        if not keep_albedo:
+            forget_albedo(track)
+        self.ground = light_ground(albedo, shadow, self.ambient, self.direct, consume=not keep_albedo)
+        del albedo, shadow
         self.panorama = make_panorama(track.scenery.theme, self.sun, track.sky)
         self.build_seconds = time.perf_counter() - t0
         log.debug("world %s light %+.1f deg, %d cones: built in %.2f s", track.name, self.light_direction_deg,
@@ -148,10 +158,12 @@ def world_key(track: Track, light_direction_deg: float = 0.0, cones: np.ndarray 
     return track.digest, round(float(light_direction_deg), 6), cone_hash
 
 
-def get_world(track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None) -> World:
-    """The cached :class:`World` for these inputs, built on first use (the last few are kept)."""
+def get_world(track: Track, light_direction_deg: float = 0.0, cones: np.ndarray | None = None,
+              keep_albedo: bool = True) -> World:
+    """The cached :class:`World` for these inputs, built on first use (the last few are kept; ``keep_albedo``: as
+    :class:`World` takes it, for a build)."""
     key = world_key(track, light_direction_deg, cones)
-    return _lru(_world_cache, key, WORLD_CACHE, lambda: World(track, light_direction_deg, cones))
+    return _lru(_world_cache, key, WORLD_CACHE, lambda: World(track, light_direction_deg, cones, keep_albedo))
 
 
 def forget_albedo(track: Track) -> bool:
@@ -178,19 +190,24 @@ def _shadow_map(albedo: GroundAlbedo, props: Props, sun: Sun) -> np.ndarray:
     return cv2.GaussianBlur(mask, (0, 0), SHADOW_BLUR)
 
 
-def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direct: float) -> LitGround:
+def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direct: float,
+                 consume: bool = False) -> LitGround:
     """Multiply the albedo by the light map and stack the direct-light share as alpha; build mips.
 
     The full-size texture is made LIGHT_BAND_ROWS rows at a time, each band from the shadow rows it reads: the
     same bytes as whole-texture operations (every step is per texel, the 2x bilinear upsampling per pair of
     rows), with about a fifth of the memory at once (a lake's texture is 170 MB; its full-size light, share and
-    lit temporaries were 300 MB more)."""
-    visible = 1.0 - shadow.astype(np.float32) / 255.0
-    light = ambient + direct * visible
-    share = direct * visible / light
-    light_low = np.clip(light * 128.0, 0, 255).astype(np.uint8)
-    share_low = np.round(share * 255.0).astype(np.uint8)
-    del visible, light, share
+    lit temporaries were 300 MB more). ``consume``: each band's albedo rows go back to the system once lit (the
+    albedo reads as zeros after; nothing may use it), and the mips are built after the last band."""
+    if consume:
+        trim_heap()  # the painting's freed temporaries, before the lit texture is made
+    light_low, share_low = np.empty_like(shadow), np.empty_like(shadow)
+    for top in range(0, shadow.shape[0], LIGHT_BAND_ROWS):  # per texel: the same bytes as the whole map at once
+        visible = 1.0 - shadow[top:top + LIGHT_BAND_ROWS].astype(np.float32) / 255.0
+        light = ambient + direct * visible
+        share = direct * visible / light
+        light_low[top:top + LIGHT_BAND_ROWS] = np.clip(light * 128.0, 0, 255).astype(np.uint8)
+        share_low[top:top + LIGHT_BAND_ROWS] = np.round(share * 255.0).astype(np.uint8)
     h, w = albedo.shape
     rgba = np.empty((h, w, 4), np.uint8)
     for top in range(0, h, LIGHT_BAND_ROWS):
@@ -200,6 +217,11 @@ def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direc
         band = rgba[top:bottom]
         cv2.cvtColor(lit, cv2.COLOR_RGB2RGBA, dst=band)
         band[..., 3] = share8
+        if consume:
+            _give_back(albedo.rgb[top:bottom])
+    del light_low, share_low
+    if consume:
+        trim_heap()  # the bands' temporaries, before the mips
     mips: list[np.ndarray] = [rgba]
     for _ in range(MIP_LEVELS - 1):
         mips.append(cv2.pyrDown(mips[-1]))
@@ -207,6 +229,28 @@ def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direc
     red, green, blue = (int(min(255, round(c * bright))) for c in albedo.mean_rgb)
     border = (red, green, blue, int(round(255 * direct / bright)))
     return LitGround(mips=tuple(mips), x0=albedo.x0, y1=albedo.y1, res=albedo.res, border=border)
+
+
+def trim_heap() -> None:
+    """Give the C heap's free memory back to the system (glibc's ``malloc_trim``; elsewhere nothing): a world's
+    build frees hundreds of MB of temporaries below glibc's raised mmap threshold, which stay in the process."""
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return
+    trim(0)
+
+
+def _give_back(rows: np.ndarray) -> None:
+    """Return the whole memory pages inside a C-contiguous block of rows to the system (Linux ``madvise``; elsewhere
+    nothing): they read as zeros after. Only for an array nothing else will read."""
+    if not (sys.platform.startswith("linux") and rows.flags.c_contiguous):
+        return
+    page = mmap.PAGESIZE
+    start = -(-rows.ctypes.data // page) * page
+    end = (rows.ctypes.data + rows.nbytes) // page * page
+    if end > start:
+        ctypes.CDLL(None).madvise(ctypes.c_void_p(start), ctypes.c_size_t(end - start), mmap.MADV_DONTNEED)
 
 
 def _upsampled_rows(low: np.ndarray, size: tuple[int, int], top: int, bottom: int) -> np.ndarray:

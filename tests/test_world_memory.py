@@ -1,0 +1,53 @@
+"""A world built with ``keep_albedo=False`` (the environment's own, without cones) gives its albedo back as it is
+lit: the same textures, and a process with one environment peaks at its lit texture, not the albedo beside it."""
+
+from __future__ import annotations
+
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+
+import numpy as np
+import pytest
+
+from tests.test_render import stadium
+from tools.sim.render import world as render_world
+
+
+def test_a_world_that_lets_its_albedo_go_has_the_same_textures():
+    track = stadium(trees=40)
+    render_world.clear_caches()
+    kept = render_world.World(track, 5.0)
+    assert track.digest in render_world._albedo_cache
+    render_world.clear_caches()
+    let_go = render_world.World(track, 5.0, keep_albedo=False)
+    assert track.digest not in render_world._albedo_cache  # painted again for another sun, never read zeroed
+    assert len(kept.ground.mips) == len(let_go.ground.mips)
+    for a, b in zip(kept.ground.mips, let_go.ground.mips, strict=True):
+        assert np.array_equal(a, b)
+    assert kept.ground.border == let_go.ground.border
+    for name, visibility in kept.sun_visibility.items():
+        assert np.array_equal(visibility, let_go.sun_visibility[name])
+    render_world.clear_caches()
+
+
+def _peak_mb_of_one_env() -> float:
+    """The process's own peak (VmHWM: getrusage's maxrss keeps the parent's from before the exec)."""
+    from pathlib import Path
+
+    from tools.envs import DriveEnv
+
+    DriveEnv(track="lake").close()
+    status = Path("/proc/self/status").read_text().splitlines()
+    return next(int(line.split()[1]) for line in status if line.startswith("VmHWM:")) / 1024
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the albedo's pages go back with Linux's madvise")
+def test_one_env_process_peaks_below_its_texture_and_albedo_together():
+    """Was: 474 MB, the lake's 128 MB albedo, its 227 MB lit texture with mips and the lighting's temporaries at
+    once (measured here: about 340 MB; the interpreter and imports are about 60 MB)."""
+    pytest.importorskip("gymnasium")
+    with ProcessPoolExecutor(1, mp_context=get_context("spawn")) as pool:
+        peak = pool.submit(_peak_mb_of_one_env).result()
+    assert peak < 400, peak
