@@ -51,3 +51,24 @@ def test_one_env_process_peaks_below_its_texture_and_albedo_together():
     with ProcessPoolExecutor(1, mp_context=get_context("spawn")) as pool:
         peak = pool.submit(_peak_mb_of_one_env).result()
     assert peak < 400, peak
+
+
+@pytest.mark.parametrize(("shadow_shape", "band"), [((520, 180), 256), ((500, 170), 96), ((520, 180), 33)])
+def test_a_consumed_albedo_is_lit_into_the_same_bytes(monkeypatch, shadow_shape, band):
+    """Band by band from the shadow rows each band reads (a shadow map of half the size, even bands), or from the
+    whole maps (any other size): the bytes of the whole-texture computation, the albedo given back as it goes."""
+    import cv2
+
+    from tests.test_render_fast_paths import _light_ground_before
+    from tools.sim.render.texture import GroundAlbedo
+
+    rng = np.random.default_rng(4)
+    rgb = rng.integers(0, 256, (1040, 360, 3), np.uint8)
+    shadow = cv2.GaussianBlur(rng.integers(0, 256, shadow_shape, np.uint8), (0, 0), 1.2)
+    before = _light_ground_before(GroundAlbedo(rgb, 0.0, 0.0, 0.05, (90, 120, 60), np.zeros((130, 45), np.uint8)),
+                                  shadow, render_world.AMBIENT, 0.55)
+    monkeypatch.setattr(render_world, "LIGHT_BAND_ROWS", band)
+    albedo = GroundAlbedo(rgb.copy(), 0.0, 0.0, 0.05, (90, 120, 60), np.zeros((130, 45), np.uint8))
+    lit = render_world.light_ground(albedo, shadow, render_world.AMBIENT, 0.55, consume=True)
+    assert np.array_equal(lit.mips[0], before)
+    assert np.array_equal(lit.mips[1], cv2.pyrDown(before))

@@ -39,7 +39,7 @@ MIN_SUN_ELEVATION = 2.0  # degrees; the sun is clamped here rather than set belo
 SHADOW_DOWNSCALE = 2  # the shadow map has 2x coarser texels than the albedo (shadows are soft anyway)
 SHADOW_BLUR = 1.2  # penumbra, in shadow-map texels
 MIP_LEVELS = 7  # level L has texels 2**L times the base size
-LIGHT_BAND_ROWS = 512  # the full-size texture is lit this many rows at a time (light_ground)
+LIGHT_BAND_ROWS = 256  # the full-size texture is lit this many rows at a time (light_ground)
 ALBEDO_CACHE, PROPS_CACHE, WORLD_CACHE = 2, 4, 3  # LRU sizes (a lake world holds ~0.35 GB)
 
 
@@ -102,13 +102,15 @@ class World:
         base = _base_props(track)
         self.props: Props = replace(base, cones=_cone_array(cones))
         self.haze = haze_colour(track.scenery.theme, track.sky)
+        self.panorama = make_panorama(track.scenery.theme, self.sun, track.sky)  # its temporaries before the texture
         shadow = _shadow_map(albedo, self.props, self.sun)
         self.sun_visibility = _prop_visibility(self.props, shadow, albedo, self.sun)
         if not keep_albedo:
             forget_albedo(track)
         self.ground = light_ground(albedo, shadow, self.ambient, self.direct, consume=not keep_albedo)
         del albedo, shadow
-        self.panorama = make_panorama(track.scenery.theme, self.sun, track.sky)
+        if not keep_albedo:
+            trim_heap()  # the shadow map: what the process holds is the lit texture
         self.build_seconds = time.perf_counter() - t0
         log.debug("world %s light %+.1f deg, %d cones: built in %.2f s", track.name, self.light_direction_deg,
                   len(self.props.cones), self.build_seconds)
@@ -201,25 +203,28 @@ def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direc
     albedo reads as zeros after; nothing may use it), and the mips are built after the last band."""
     if consume:
         trim_heap()  # the painting's freed temporaries, before the lit texture is made
-    light_low, share_low = np.empty_like(shadow), np.empty_like(shadow)
-    for top in range(0, shadow.shape[0], LIGHT_BAND_ROWS):  # per texel: the same bytes as the whole map at once
-        visible = 1.0 - shadow[top:top + LIGHT_BAND_ROWS].astype(np.float32) / 255.0
-        light = ambient + direct * visible
-        share = direct * visible / light
-        light_low[top:top + LIGHT_BAND_ROWS] = np.clip(light * 128.0, 0, 255).astype(np.uint8)
-        share_low[top:top + LIGHT_BAND_ROWS] = np.round(share * 255.0).astype(np.uint8)
     h, w = albedo.shape
+    halves = (2 * shadow.shape[0], 2 * shadow.shape[1]) == (h, w) and LIGHT_BAND_ROWS % 2 == 0
+    whole = None if halves else _light_maps(shadow, ambient, direct)  # another size: the maps resized whole
     rgba = np.empty((h, w, 4), np.uint8)
     for top in range(0, h, LIGHT_BAND_ROWS):
         bottom = min(h, top + LIGHT_BAND_ROWS)
-        light8, share8 = (_upsampled_rows(low, (w, h), top, bottom) for low in (light_low, share_low))
+        if whole is None:  # the shadow rows the band reads, one more on each side (see _upsampled_rows)
+            first, end = max(0, top // 2 - 1), min(shadow.shape[0], bottom // 2 + 1)
+            light8, share8 = (cv2.resize(low, (w, 2 * (end - first)), interpolation=cv2.INTER_LINEAR)
+                              [top - 2 * first:bottom - 2 * first]
+                              for low in _light_maps(shadow[first:end], ambient, direct))
+        else:
+            light8, share8 = (_upsampled_rows(low, (w, h), top, bottom) for low in whole)
         lit = cv2.multiply(albedo.rgb[top:bottom], cv2.cvtColor(light8, cv2.COLOR_GRAY2RGB), scale=1.0 / 128.0)
         band = rgba[top:bottom]
         cv2.cvtColor(lit, cv2.COLOR_RGB2RGBA, dst=band)
         band[..., 3] = share8
+        del light8, share8, lit  # before the next band's: one band's temporaries at a time
         if consume:
             _give_back(albedo.rgb[top:bottom])
-    del light_low, share_low
+            trim_heap()
+    del whole
     if consume:
         trim_heap()  # the bands' temporaries, before the mips
     mips: list[np.ndarray] = [rgba]
@@ -229,6 +234,15 @@ def light_ground(albedo: GroundAlbedo, shadow: np.ndarray, ambient: float, direc
     red, green, blue = (int(min(255, round(c * bright))) for c in albedo.mean_rgb)
     border = (red, green, blue, int(round(255 * direct / bright)))
     return LitGround(mips=tuple(mips), x0=albedo.x0, y1=albedo.y1, res=albedo.res, border=border)
+
+
+def _light_maps(shadow: np.ndarray, ambient: float, direct: float) -> tuple[np.ndarray, np.ndarray]:
+    """The light (x128) and direct-light share (x255) of shadow-map texels, uint8: per texel, so any block of rows
+    gives those rows of the whole map's."""
+    visible = 1.0 - shadow.astype(np.float32) / 255.0
+    light = ambient + direct * visible
+    share = direct * visible / light
+    return np.clip(light * 128.0, 0, 255).astype(np.uint8), np.round(share * 255.0).astype(np.uint8)
 
 
 def trim_heap() -> None:
