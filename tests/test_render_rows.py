@@ -71,3 +71,22 @@ def test_the_model_input_without_the_jpeg_is_the_whole_frames():
         b, _, _, _, _ = whole.step(action)
     cut.close()
     whole.close()
+
+
+def test_the_renderers_of_a_world_share_its_tables_while_it_lives():
+    """Was: every episode's renderer made its own camera tables and sky (7 MB a reset, kept by the heap)."""
+    import gc
+    import weakref
+
+    from tools.sim.render.renderer import _WORLD_TABLES
+
+    world = World(stadium(trees=20))
+    first, second = Renderer(world, seed=1), Renderer(world, seed=1)
+    assert first.cameras is second.cameras and first._sky is second._sky
+    assert Renderer(world, rig="classic").cameras is not first.cameras  # per rig
+    pose = Pose(30.0, -40.0, 0.1)
+    assert np.array_equal(first.render(pose, "left", 0.7), second.render(pose, "left", 0.7))
+    alive, tables = weakref.ref(world), len(_WORLD_TABLES)
+    del world, first, second
+    gc.collect()
+    assert alive() is None and len(_WORLD_TABLES) == tables - 1  # the shared tables keep no world alive

@@ -9,6 +9,8 @@ haze, props are painted far to near, and light intensity rescales each pixel's d
 from __future__ import annotations
 
 import math
+from functools import lru_cache
+from weakref import WeakKeyDictionary
 
 import cv2
 import numpy as np
@@ -54,6 +56,13 @@ class _CameraState:
         self.haze_block = np.ascontiguousarray(np.broadcast_to(haze, (self.fog_rows, FRAME_WIDTH, 4)))
 
 
+#: per world, per rig: its cameras' tables and its sky with margins, while the world lives (nothing in them refers
+#: to the world, which would keep it alive)
+_WORLD_TABLES: WeakKeyDictionary[World, dict[str, tuple[dict[str, _CameraState], np.ndarray]]] = WeakKeyDictionary()
+_camera_models = lru_cache(maxsize=4)(camera_models)  # the rigs' camera geometry, made once
+_bonnet_layer = lru_cache(maxsize=16)(bonnet_layer)  # per lateral offset
+
+
 class Renderer:
     """Renders frames of one world. Not thread-safe (it reuses a scratch frame); make one per thread.
 
@@ -65,14 +74,19 @@ class Renderer:
         self.world = world
         self.rig = camera_rig(rig)
         self.postfx = PostFx(world.track.appearance, seed)
+        # the tables of the world and rig (read only), shared by its renderers: an episode's is made in no time
+        shared = _WORLD_TABLES.setdefault(world, {})
+        if rig not in shared:
+            cameras = {name: _CameraState(model, world) for name, model in _camera_models(rig).items()}
+            # the panorama with wrapped margins: cv2.remap's BORDER_WRAP path is ~3x slower than a plain lookup
+            pano = world.panorama
+            sky = np.ascontiguousarray(np.concatenate([pano[:, -SKY_PAD:], pano, pano[:, :SKY_PAD]], 1))
+            shared[rig] = (cameras, sky)
+        self.cameras, self._sky = shared[rig]
         self.props = PropPainter(world)
-        self.cameras = {name: _CameraState(model, world) for name, model in camera_models(rig).items()}
-        self._bonnets = ({name: bonnet_layer(state.model.lateral) for name, state in self.cameras.items()}
+        self._bonnets = ({name: _bonnet_layer(state.model.lateral) for name, state in self.cameras.items()}
                          if self.rig.bonnet else {})
         self._fb = np.empty((FRAME_HEIGHT, FRAME_WIDTH, 4), np.uint8)
-        # the panorama with wrapped margins: cv2.remap's BORDER_WRAP path is ~3x slower than a plain lookup
-        pano = world.panorama
-        self._sky = np.ascontiguousarray(np.concatenate([pano[:, -SKY_PAD:], pano, pano[:, :SKY_PAD]], 1))
         self._lut_cache: dict[float, tuple[np.ndarray, float]] = {}
 
     def render(self, pose: Pose, camera: str = "center", light_intensity: float = 1.0,
