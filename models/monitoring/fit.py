@@ -25,6 +25,8 @@ from models.monitoring.ensemble import SCORE_NAME as ENSEMBLE
 from models.monitoring.ensemble import check_ensemble_members, ensemble_score_graph, network_outputs
 from models.monitoring.failures import LabelRules, labels, load_run, run_files
 from models.monitoring.frames import load_runs
+from models.monitoring.framestats import SCORE_NAME as FRAMESTATS
+from models.monitoring.framestats import combine_scores, fit_framestats, framestats_graph
 from models.monitoring.predictor import SCORE_NAME as PREDICTOR
 from models.monitoring.predictor import train_predictor
 from protocol.errors import BadValue
@@ -33,7 +35,7 @@ log = logging.getLogger(__name__)
 
 #: The scores ``rbc monitor fit`` can attach (``keep``: the model file's own monitor, calibrated afresh).
 KEEP = "keep"
-SCORES = (AUTOENCODER, SHIFT, PREDICTOR, ENSEMBLE, KEEP)
+SCORES = (AUTOENCODER, SHIFT, PREDICTOR, ENSEMBLE, FRAMESTATS, KEEP)
 
 
 @dataclass(frozen=True)
@@ -48,8 +50,12 @@ class FitPlan:
     # learns from runs that failed (rbc monitor failures) how likely a failure is within a few seconds; or "keep":
     # the monitor the model file already carries, calibrated afresh (another target rate, other nominal driving);
     # "ensemble": the served steering against ``members``, other networks of the model's recipe (no training here)
+    # "framestats": the frame's brightness and contrast against nominal frames' (--data; models.monitoring.framestats)
     score: str = AUTOENCODER
     members: tuple[Path, ...] = ()
+    # also the frame statistics beside the score (fitted on ``train``): the larger of the two, each in units of its
+    # own alarm threshold, so that either can warn (the ensemble is blind to washed-out frames, see framestats)
+    with_framestats: bool = False
     epochs: int = 6
     stride: int = 2  # every 2nd training frame: neighbours at 15 Hz are near copies
     seed: int = 0
@@ -64,9 +70,12 @@ class FitPlan:
                            f"{', '.join(sorted(str(p) for p in overlap))}")
         if self.score not in SCORES:
             raise BadValue(f"unknown score {self.score!r}; choose one of {', '.join(SCORES)}")
-        if (self.score in (AUTOENCODER, PREDICTOR) and not self.train) or not self.calibration:
-            raise BadValue("give calibration data (--calibration), and for the autoencoder and the predictor "
-                           "training data (--data)")
+        if (self.score in (AUTOENCODER, PREDICTOR, FRAMESTATS) and not self.train) or not self.calibration:
+            raise BadValue("give calibration data (--calibration), and for the autoencoder, the predictor and the "
+                           "frame statistics training data (--data)")
+        if self.with_framestats and (self.score in (FRAMESTATS, PREDICTOR, KEEP) or not self.train):
+            raise BadValue("--with-framestats goes beside the autoencoder, shift or ensemble score, with nominal "
+                           "frames to fit it on (--data)")
         if self.members and self.score != ENSEMBLE:
             raise BadValue(f"members (--member) are for --score {ENSEMBLE}, not {self.score}")
         if self.epochs < 1 or self.stride < 1:
@@ -107,6 +116,8 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
     elif plan.score == SHIFT:
         graph = shift_disagreement_graph(plan.model)
         record |= {"shift_pixels": SHIFT_PIXELS}
+    elif plan.score == FRAMESTATS:
+        graph = _framestats(plan, contract, say, record)
     elif plan.score == ENSEMBLE:
         members = check_ensemble_members(plan.model, plan.members)
         say(f"building the ensemble monitor of {len(members)} members")
@@ -126,8 +137,20 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
     runs = _calibration_inputs(plan, contract, say)
     if STEERING in inputs:  # the steering the server would feed: the served network's own, on the same frames
         say("running the served model on the calibration frames")
-    scores = [graph_scores(graph, r, steering=network_outputs(plan.model, r) if STEERING in inputs else None)
-              for r in runs]
+    steering = [network_outputs(plan.model, r) if STEERING in inputs else None for r in runs]
+    scores = [graph_scores(graph, r, steering=s) for r, s in zip(runs, steering, strict=True)]
+    if plan.with_framestats:
+        second = _framestats(plan, contract, say, record)
+        first_alarm = calibrate(scores, plan.window, plan.warnings_per_hour, plan.alarms_per_hour).alarm
+        second_alarm = calibrate([graph_scores(second, r) for r in runs], plan.window, plan.warnings_per_hour,
+                                 plan.alarms_per_hour).alarm
+        say(f"combined with the frame statistics: each part divided by its own alarm threshold "
+            f"({first_alarm:.4g} and {second_alarm:.4g}), the larger one")
+        graph = combine_scores(graph, second, (first_alarm, second_alarm))
+        record |= {"score": f"{record['score']}+{FRAMESTATS}",
+                   "parts": [{"score": str(record["score"]), "alarm": first_alarm},
+                             {"score": FRAMESTATS, "alarm": second_alarm}]}
+        scores = [graph_scores(graph, r, steering=s) for r, s in zip(runs, steering, strict=True)]
     cal = calibrate(scores, plan.window, plan.warnings_per_hour, plan.alarms_per_hour,
                     source=", ".join(p.name for p in plan.calibration))
     record = {**cal.record, **record}
@@ -181,6 +204,21 @@ def _failure_frames(plan: FitPlan, say: Callable[[str], None]) -> tuple[np.ndarr
         if (k + 1) % 20 == 0:
             say(f"  {k + 1} of {len(files)} runs")
     return np.concatenate(xs), np.concatenate(ys).astype(np.int8), len(files)
+
+
+def _framestats(plan: FitPlan, contract: PreprocessContract, say: Callable[[str], None], record: dict) -> bytes:
+    """The frame-statistics graph fitted on ``plan.train``'s frames (every ``plan.stride``-th); notes in ``record``."""
+    import onnx
+
+    say(f"reading nominal frames for the frame statistics from {len(plan.train)} folder(s) (every {plan.stride}. "
+        f"frame)")
+    frames = np.concatenate(load_runs(list(plan.train), contract, plan.stride,
+                                      progress=lambda d, t: _every_tenth(say, d, t)))
+    mu, whiten = fit_framestats(frames, contract)
+    served = onnx.load(str(plan.model))
+    opset = max(o.version for o in served.opset_import if o.domain in ("", "ai.onnx"))
+    record |= {"framestats_frames": int(len(frames)), "train": [p.name for p in plan.train]}
+    return framestats_graph(contract, mu, whiten, opset=opset, ir_version=served.ir_version)
 
 
 def _every_tenth(say: Callable[[str], None], done: int, total: int) -> None:

@@ -35,10 +35,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                           "disagreement with itself on the frame moved 3 pixels sideways (no training); predictor: "
                           "how likely a failure is within 3 s, learnt from rbc monitor failures' runs (--data); "
                           "ensemble: the served steering's distance to the mean of other networks of the model's "
-                          "recipe (--member, two or more) plus their spread; keep: the "
+                          "recipe (--member, two or more) plus their spread; framestats: the frame's brightness and "
+                          "contrast against nominal frames' (--data); keep: the "
                           "monitor MODEL already carries, its thresholds set afresh (default %(default)s)")
+    fit.add_argument("--with-framestats", action="store_true",
+                     help="also watch the frames' brightness and contrast against the nominal frames of --data "
+                          "(a camera check beside the score: the larger of the two, each divided by its own alarm "
+                          "threshold)")
     fit.add_argument("--data", type=Path, action="append", default=[], metavar="DIR",
-                     help="nominal driving to train the autoencoder on (Udacity-format folder, e.g. from rbc collect), "
+                     help="nominal driving to train the autoencoder or fit the frame statistics on (Udacity-format "
+                          "folder, e.g. from rbc collect), "
                           "or for the predictor a folder of rbc monitor failures (repeat)")
     fit.add_argument("--member", dest="members", type=Path, action="append", default=[], metavar="M.onnx",
                      help="for --score ensemble: a steering model trained to MODEL's recipe with another seed "
@@ -183,7 +189,7 @@ def _fit(args: argparse.Namespace) -> int:
         if not folder.exists():
             raise CommandError(f"no such file or folder: {folder}")
     plan = FitPlan(args.model, args.out, tuple(args.data), tuple(args.calibration), score=args.score,
-                   members=tuple(args.members), epochs=args.epochs,
+                   members=tuple(args.members), with_framestats=args.with_framestats, epochs=args.epochs,
                    stride=args.stride, seed=args.seed, warnings_per_hour=args.warnings_per_hour,
                    alarms_per_hour=args.alarms_per_hour)
     result = fit_monitor(plan, say=print)
