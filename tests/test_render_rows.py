@@ -82,10 +82,11 @@ def test_the_renderers_of_a_world_share_its_tables_while_it_lives():
 
     world = World(stadium(trees=20))
     first, second = Renderer(world, seed=1), Renderer(world, seed=1)
-    assert first.cameras is second.cameras and first._sky is second._sky
-    assert Renderer(world, rig="classic").cameras is not first.cameras  # per rig
     pose = Pose(30.0, -40.0, 0.1)
     assert np.array_equal(first.render(pose, "left", 0.7), second.render(pose, "left", 0.7))
+    assert list(first._states) == ["left"]  # a camera's tables are made for its first frame
+    assert first.cameras is second.cameras and first._sky is second._sky
+    assert Renderer(world, rig="classic").cameras is not first.cameras  # per rig
     alive, tables = weakref.ref(world), len(_WORLD_TABLES)
     del world, first, second
     gc.collect()

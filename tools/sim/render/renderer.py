@@ -77,15 +77,13 @@ class Renderer:
         # the tables of the world and rig (read only), shared by its renderers: an episode's is made in no time
         shared = _WORLD_TABLES.setdefault(world, {})
         if rig not in shared:
-            cameras = {name: _CameraState(model, world) for name, model in _camera_models(rig).items()}
             # the panorama with wrapped margins: cv2.remap's BORDER_WRAP path is ~3x slower than a plain lookup
             pano = world.panorama
             sky = np.ascontiguousarray(np.concatenate([pano[:, -SKY_PAD:], pano, pano[:, :SKY_PAD]], 1))
-            shared[rig] = (cameras, sky)
-        self.cameras, self._sky = shared[rig]
+            shared[rig] = ({}, sky)  # each camera's tables made for its first frame
+        self._states, self._sky = shared[rig]
+        self._models = _camera_models(rig)
         self.props = PropPainter(world)
-        self._bonnets = ({name: _bonnet_layer(state.model.lateral) for name, state in self.cameras.items()}
-                         if self.rig.bonnet else {})
         self._fb = np.empty((FRAME_HEIGHT, FRAME_WIDTH, 4), np.uint8)
         self._lut_cache: dict[float, tuple[np.ndarray, float]] = {}
 
@@ -99,10 +97,7 @@ class Renderer:
         are left unspecified (the sky and ground are drawn for those rows alone: a tilted camera's warp reads the
         whole frame, so with bumps the whole frame is drawn).
         """
-        try:
-            cam = self.cameras[camera]
-        except KeyError:
-            raise ValueError(f"unknown camera {camera!r}; expected one of {sorted(self.cameras)}") from None
+        cam = self._state(camera)
         m = cam.model
         fb: np.ndarray = self._fb
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
@@ -155,8 +150,8 @@ class Renderer:
         pos = np.array([pose.x + c * m.forward - s * m.lateral, pose.y + s * m.forward + c * m.lateral, m.height])
         self.props.draw(out, m, pos, axes, light_intensity)
         # the bonnet, fixed to the car: drawn after the bumps' warp, before the camera's processing (where wanted)
-        if self._bonnets and bottom > BONNET_ROWS.start:
-            draw_bonnet(out, self._bonnets[camera], light_intensity)
+        if self.rig.bonnet and bottom > BONNET_ROWS.start:
+            draw_bonnet(out, _bonnet_layer(m.lateral), light_intensity)
         return self.postfx.apply(out) if self.postfx.active else out
 
     def _drawn_rows(self, rows: tuple[int, int] | None, tilted: float) -> tuple[int, int]:
@@ -173,7 +168,22 @@ class Renderer:
     def render_all(self, pose: Pose, light_intensity: float = 1.0, pitch_deg: float = 0.0,
                    roll_deg: float = 0.0) -> dict[str, np.ndarray]:
         """Frames of all three cameras, keyed by camera name."""
-        return {name: self.render(pose, name, light_intensity, pitch_deg, roll_deg) for name in self.cameras}
+        return {name: self.render(pose, name, light_intensity, pitch_deg, roll_deg) for name in self._models}
+
+    @property
+    def cameras(self) -> dict[str, _CameraState]:
+        """Every camera's tables (made here where no frame of that camera has been rendered yet)."""
+        for name in self._models:
+            self._state(name)
+        return self._states
+
+    def _state(self, camera: str) -> _CameraState:
+        state = self._states.get(camera)
+        if state is None:
+            if camera not in self._models:
+                raise ValueError(f"unknown camera {camera!r}; expected one of {sorted(self._models)}")
+            state = self._states[camera] = _CameraState(self._models[camera], self.world)
+        return state
 
     def _gain_lut(self, intensity: float) -> tuple[np.ndarray, float]:
         """uint8 table and scale of the brightness factor per direct-light share (alpha 0..255).
