@@ -1,11 +1,10 @@
 """#53: the ensemble monitor. Its score graph takes the served network's steering beside the frame; the score is
 the served steering's distance to the members' mean (plus their spread), members of exactly the served model's
-contract, two at least; the server feeds the steering through one function; the bundled single-input monitors
-read and score exactly as before. Tiny members: weight-noised copies of generalist.onnx."""
+contract, two at least; the server feeds the steering through one function (the bundled files' monitors:
+test_monitor_bundled.py). Tiny members: weight-noised copies of generalist.onnx."""
 
 from __future__ import annotations
 
-import base64
 import json
 import logging
 import math
@@ -18,7 +17,7 @@ from helpers_server import REPO, SAMPLE_LOG
 
 from drive_server.serving.client_monitor import ClientMonitor, MonitorMode, MonitorPolicy
 from drive_server.serving.model import SteeringModel
-from drive_server.serving.monitor import FRAME, MONITOR_KEY, STEERING, MonitorGraph, MonitorSpec
+from drive_server.serving.monitor import FRAME, STEERING, MonitorGraph, MonitorSpec
 from drive_server.serving.pipeline import DriveConfig, DrivePipeline
 from drive_server.serving.preprocess import preprocess
 from protocol import decode_image, parse_telemetry
@@ -128,50 +127,6 @@ def test_a_wrong_contract_member_or_a_single_one_is_refused_in_one_line(members,
 def test_members_are_for_the_ensemble_score_only(members, calibration, tmp_path, capsys):
     assert _fit(members, calibration, tmp_path / "o.onnx", "--score", "shift") == 2
     assert "members (--member) are for --score ensemble" in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("name", ["generalist_pilotnet.onnx", "unity.onnx"])
-def test_the_bundled_single_input_monitors_read_and_score_as_before(name, frames):
-    """Their spec reads back to the very text stored (no inputs key), the graph takes the frame only, and the
-    server's score is the graph's own answer on the frame, bit for bit."""
-    path = PRETRAINED / name
-    meta = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
-    spec, graph = SteeringModel(path).monitor()
-    assert spec.inputs == (FRAME,) and not spec.wants_steering and not graph.wants_steering
-    assert spec.to_json() == meta[MONITOR_KEY] and "inputs" not in json.loads(meta[MONITOR_KEY])
-    session = ort.InferenceSession(base64.b64decode(meta["rbc.monitor.onnx"]), providers=["CPUExecutionProvider"])
-    model = SteeringModel(path)
-    pipeline = DrivePipeline(model, DriveConfig(monitor=MonitorPolicy(MonitorMode.WARN, budget_ms=None)))
-    monitor = pipeline.client_monitor("t")
-    for frame in FRAMES[:4]:
-        x = preprocess(decode_image(frame.payload()["image"], reduce=pipeline.reduce), model.contract)
-        want = float(np.asarray(session.run(None, {session.get_inputs()[0].name: x})[0]).reshape(-1)[0])
-        pipeline.run(parse_telemetry(frame.payload()), None, monitor)
-        assert monitor.last is not None and monitor.last.score == want
-
-
-def test_the_bundled_generalist_carries_the_ensemble_and_the_server_scores_it_with_the_networks_steering():
-    """generalist.onnx's monitor is the benchmarked ensemble: two member networks in its graph, calibrated on
-    nominal laps of training worlds; drive_server's score is that graph's answer on the frame and the served
-    network's own steering (before smoothing), bit for bit; its steering is the network's as without a monitor."""
-    meta = {p.key: p.value for p in onnx.load(str(GENERALIST)).metadata_props}
-    spec, graph = SteeringModel(GENERALIST).monitor()
-    assert spec.score == "ensemble" and spec.inputs == (FRAME, STEERING) and graph.wants_steering
-    calibration = json.loads(meta[MONITOR_KEY])["calibration"]
-    assert len(calibration["members"]) == 2 and calibration["hours"] >= 1.0 and 0 < spec.warn <= spec.alarm
-    session = ort.InferenceSession(base64.b64decode(meta["rbc.monitor.onnx"]), providers=["CPUExecutionProvider"])
-    names = [i.name for i in session.get_inputs()]
-    model = SteeringModel(GENERALIST)
-    pipeline = DrivePipeline(model, DriveConfig(monitor=MonitorPolicy(MonitorMode.WARN, budget_ms=None)))
-    plain = DrivePipeline(model, DriveConfig())
-    monitor, smoother, smoother_plain = pipeline.client_monitor("t"), pipeline.smoother(), plain.smoother()
-    for frame in FRAMES[:4]:
-        x = preprocess(decode_image(frame.payload()["image"], reduce=pipeline.reduce), model.contract)
-        steering = np.array([[model.predict(x)]], np.float32)  # (batch, 1)
-        want = float(np.asarray(session.run(None, {names[0]: x, names[1]: steering})[0]).reshape(-1)[0])
-        sent = pipeline.run(parse_telemetry(frame.payload()), smoother, monitor)[0].steering
-        assert monitor.last is not None and monitor.last.score == pytest.approx(want, abs=1e-6)
-        assert sent == plain.run(parse_telemetry(frame.payload()), smoother_plain, None)[0].steering
 
 
 def test_a_spec_names_its_inputs_and_the_graph_must_match(members):
