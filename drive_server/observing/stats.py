@@ -11,10 +11,11 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TypedDict
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
+from drive_server.observing.monitor_stats import MonitorSummary, MonitorTally, monitor_line, summarize_monitor
 from protocol.runrecords import atomic_path
 
 #: Pipeline stages, in order; ``total`` is handler entry to reply queued.
@@ -33,6 +34,7 @@ class StatsSummary(TypedDict):
     bad_output: int
     sampled: int  # frames the percentiles are computed over
     stages_ms: dict[str, dict[str, float]]  # stage -> p50, p90, p99, mean, max (empty without samples)
+    monitor: NotRequired[MonitorSummary]  # only when a client's monitor scored a frame or was switched off
 
 
 class LatencyStats:
@@ -48,6 +50,7 @@ class LatencyStats:
         self.capacity = capacity
         self.recorded = 0  # frames whose timings went into the ring (``frames`` may also count others)
         self._ring = np.zeros((min(capacity, _INITIAL_ROWS), len(STAGES)), np.float32)
+        self.monitor = MonitorTally(capacity)  # what the client's misbehaviour monitor did (none: empty)
 
     def record(self, timings: tuple[float, float, float, float, float]) -> None:
         if self.recorded == len(self._ring) < self.capacity:  # grow until the ring is full size
@@ -66,6 +69,7 @@ class LatencyStats:
         self.manual += other.manual
         self.malformed += other.malformed
         self.bad_output += other.bad_output
+        self.monitor.absorb(other.monitor)
         for kind, n in other.bad_input.items():
             self.bad_input[kind] = self.bad_input.get(kind, 0) + n
 
@@ -117,9 +121,9 @@ def save_stats(path: Path, stats: Iterable[LatencyStats]) -> None:
     arrays: dict[str, np.ndarray] = {}
     meta = []
     for i, s in enumerate(stats):
-        arrays[f"s{i}"] = s.samples()
+        arrays[f"s{i}"], arrays[f"m{i}"] = s.samples(), s.monitor.samples()
         meta.append({"name": s.name, "frames": s.frames, "manual": s.manual, "malformed": s.malformed,
-                     "bad_input": s.bad_input, "bad_output": s.bad_output})
+                     "bad_input": s.bad_input, "bad_output": s.bad_output, "monitor": s.monitor.counters()})
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
     with atomic_path(path) as tmp, tmp.open("wb") as fh:  # a file object: np.savez would add ".npz" to a name
         # allow_pickle spelled out (numpy's default): else numpy's stub reads **arrays as possibly naming it
@@ -130,9 +134,14 @@ def load_stats(path: Path) -> list[LatencyStats]:
     """The statistics saved by ``save_stats``."""
     with np.load(Path(path)) as data:
         meta = json.loads(data["meta"].tobytes().decode())
-        return [LatencyStats.from_samples(m["name"], data[f"s{i}"], m["frames"], m["manual"], m["malformed"],
-                                          m.get("bad_input"), m.get("bad_output", 0))
-                for i, m in enumerate(meta)]
+        out = []
+        for i, m in enumerate(meta):
+            stats = LatencyStats.from_samples(m["name"], data[f"s{i}"], m["frames"], m["manual"], m["malformed"],
+                                              m.get("bad_input"), m.get("bad_output", 0))
+            if f"m{i}" in data:
+                stats.monitor = MonitorTally.restore(data[f"m{i}"], m.get("monitor"))
+            out.append(stats)
+        return out
 
 
 def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None) -> StatsSummary:
@@ -154,6 +163,9 @@ def summarize(stats: Iterable[LatencyStats], since: dict[str, int] | None = None
         "sampled": len(timings),
         "stages_ms": {},
     }
+    monitor = summarize_monitor(s.monitor for s in stats)
+    if monitor is not None:
+        out["monitor"] = monitor
     if len(timings):
         pct = np.percentile(timings, [50, 90, 99], axis=0) * 1e3
         for i, stage in enumerate(STAGES):
@@ -181,6 +193,8 @@ def summary_line(summary: StatsSummary) -> str:
         tail += " | malformed: " + ", ".join(f"{kind} {n}" for kind, n in summary["bad_input"].items())
     if summary.get("bad_output"):
         tail += f" | non-finite model output {summary['bad_output']}"
+    if "monitor" in summary:
+        tail += " | " + monitor_line(summary["monitor"])
     stages = summary["stages_ms"]
     if not stages:
         return head + tail

@@ -174,6 +174,8 @@ class DriveServer:
             self._fallback(client, "internal", f"internal error: {type(exc).__name__}: {exc}"[:200])
             return
         client.stats.record((t_parse + decode, pre, infer, control + (t5 - t4), t5 - t0))
+        if client.monitor is not None:
+            client.stats.monitor.note(client.monitor)
         if self.recorder is not None:  # after the reply: recording never delays the simulator
             self.recorder.record(telemetry.image_b64, sent, telemetry.speed,
                                  client.monitor.last if client.monitor is not None else None)

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
+from drive_server.observing.monitor_stats import monitor_line
 from drive_server.observing.stats import STAGES
 from tools.errors import CommandError
 from tools.wire.frames import SourceFrame, log_frames, synthetic_frames
@@ -165,8 +166,14 @@ def format_table(result: BenchResult) -> str:
             s = stages[stage]
             rows.append(f"{'server ' + stage:24}{s['p50']:8.3f}{s['p90']:8.3f}{s['p99']:8.3f}{s['max']:8.3f}")
     total = result.server.get("total", {})
+    monitor = total.get("monitor")
+    if monitor is not None and monitor["time_ms"]:
+        m = monitor["time_ms"]
+        rows.append(f"{'  of which monitor':24}{m['p50']:8.3f}{m['p90']:8.3f}{m['p99']:8.3f}{m['max']:8.3f}")
     if total:
         rows.append(f"server frames {total['frames']} (incl. warm-up), malformed {total['malformed']}")
+    if monitor is not None:
+        rows.append(monitor_line(monitor))
     rows.append(f"throughput {result.telemetry_per_s:,.0f} telemetry/s "
                 f"({result.clients} closed-loop client{'s' if result.clients > 1 else ''})")
     return "\n".join(rows)
