@@ -153,3 +153,38 @@ def test_a_framestats_fit_without_what_it_needs_is_one_line(extra, problem, tmp_
                  str(tmp_path / "o.onnx"), *extra]) == 2
     err = capsys.readouterr().err
     assert problem in err and "Traceback" not in err and not (tmp_path / "o.onnx").exists()
+
+
+def test_keep_with_framestats_puts_the_camera_check_beside_the_monitor_a_file_carries(tmp_path, capsys):
+    """How the bundled files got theirs: the carried monitor (here the generalist's ensemble) calibrated afresh
+    beside the frame statistics; its own record survives, and a file that has the camera check refuses a second."""
+    from tools.cli import main
+
+    calibration = _calibration_set(tmp_path / "calibration")
+    out = tmp_path / "kept.onnx"
+    base = ["monitor", "fit", "--score", "keep", "--with-framestats", "--data", str(SAMPLE_LOG), "--stride", "1",
+            "--calibration", str(calibration), "--out"]
+    assert main([*base[:2], str(GENERALIST), *base[2:], str(out)]) == 0
+    spec, graph = SteeringModel(out).monitor()
+    old, _ = SteeringModel(GENERALIST).monitor()
+    assert spec.score == "ensemble+framestats" and spec.inputs == old.inputs and graph.wants_steering
+    assert spec.calibration["members"] == old.calibration["members"] and spec.calibration["recalibrated"]
+    assert spec.calibration["framestats_train"] == [SAMPLE_LOG.name]
+    capsys.readouterr()
+    assert main([*base[:2], str(out), *base[2:], str(tmp_path / "twice.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert "has the frame statistics already" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "twice.onnx").exists()
+
+
+def test_calibration_frames_are_read_one_run_at_a_time_and_a_bad_folder_is_refused_first(tmp_path):
+    """An hour of PilotNet's 66x200 input is 9 GB: the runs come one at a time, the folders checked before any."""
+    from models.monitoring.frames import iter_runs, load_runs
+
+    contract = SteeringModel(GENERALIST).contract
+    runs = iter_runs([SAMPLE_LOG], contract)
+    first = next(runs)
+    assert np.array_equal(first, load_runs([SAMPLE_LOG], contract)[0])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(BadValue):
+        iter_runs([SAMPLE_LOG, tmp_path / "empty"], contract)  # raises at the call, before a frame is read

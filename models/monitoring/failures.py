@@ -60,6 +60,15 @@ def load_run(path: Path) -> FailureRun:
         raise BadValue(f"{path}: not a failure run of rbc monitor failures ({exc})") from None
 
 
+def load_meta(path: Path) -> dict:
+    """A run file's metadata alone (an npz reads only the members asked for), to refuse a file before any work."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as data:
+            return dict(json.loads(str(data["meta"])))
+    except (OSError, KeyError, ValueError) as exc:
+        raise BadValue(f"{path}: not a failure run of rbc monitor failures ({exc})") from None
+
+
 def run_files(folders: Sequence[Path]) -> list[Path]:
     """Every run file in ``folders``, in name order; BadValue if a folder holds none."""
     out = []

@@ -5,7 +5,7 @@ runs, and write the steering model's file with the monitor attached."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,10 +23,10 @@ from models.monitoring.disagreement import SCORE_NAME as SHIFT
 from models.monitoring.disagreement import SHIFT_PIXELS, graph_scores, shift_disagreement_graph
 from models.monitoring.ensemble import SCORE_NAME as ENSEMBLE
 from models.monitoring.ensemble import check_ensemble_members, ensemble_score_graph, network_outputs
-from models.monitoring.failures import LabelRules, labels, load_run, run_files
-from models.monitoring.frames import load_runs
+from models.monitoring.failures import LabelRules, labels, load_meta, load_run, run_files
+from models.monitoring.frames import iter_runs, load_runs
 from models.monitoring.framestats import SCORE_NAME as FRAMESTATS
-from models.monitoring.framestats import combine_scores, fit_framestats, framestats_graph
+from models.monitoring.framestats import combine_scores, fit_features, frame_features, framestats_graph
 from models.monitoring.predictor import SCORE_NAME as PREDICTOR
 from models.monitoring.predictor import train_predictor
 from protocol.errors import BadValue
@@ -73,9 +73,9 @@ class FitPlan:
         if (self.score in (AUTOENCODER, PREDICTOR, FRAMESTATS) and not self.train) or not self.calibration:
             raise BadValue("give calibration data (--calibration), and for the autoencoder, the predictor and the "
                            "frame statistics training data (--data)")
-        if self.with_framestats and (self.score in (FRAMESTATS, PREDICTOR, KEEP) or not self.train):
-            raise BadValue("--with-framestats goes beside the autoencoder, shift or ensemble score, with nominal "
-                           "frames to fit it on (--data)")
+        if self.with_framestats and (self.score in (FRAMESTATS, PREDICTOR) or not self.train):
+            raise BadValue("--with-framestats goes beside the autoencoder, shift or ensemble score (or the one the "
+                           "file keeps), with nominal frames to fit it on (--data)")
         if self.members and self.score != ENSEMBLE:
             raise BadValue(f"members (--member) are for --score {ENSEMBLE}, not {self.score}")
         if self.epochs < 1 or self.stride < 1:
@@ -129,19 +129,24 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
         if found is None:
             raise BadValue(f"{plan.model.name} carries no monitor to calibrate afresh (--score keep)")
         old, graph_obj = found
+        if plan.with_framestats and FRAMESTATS in old.score.split("+"):
+            raise BadValue(f"{plan.model.name}'s monitor ({old.score}) has the frame statistics already: "
+                           "--score keep without --with-framestats calibrates it afresh")
         graph, inputs = graph_obj.model_bytes, old.inputs
         kept = {k: v for k, v in old.calibration.items() if k in ("train_frames", "train", "epochs", "shift_pixels",
                                                                  "seed", "members", "spread")}
         record |= {**kept, "score": old.score, "recalibrated": True}
     say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
-    runs = _calibration_inputs(plan, contract, say)
+    second = _framestats(plan, contract, say, record) if plan.with_framestats else None
     if STEERING in inputs:  # the steering the server would feed: the served network's own, on the same frames
-        say("running the served model on the calibration frames")
-    steering = [network_outputs(plan.model, r) if STEERING in inputs else None for r in runs]
-    scores = [graph_scores(graph, r, steering=s) for r, s in zip(runs, steering, strict=True)]
-    if plan.with_framestats:
-        second = _framestats(plan, contract, say, record)
-        second_scores = [graph_scores(second, r) for r in runs]
+        say("running the served model beside the monitor on the calibration frames")
+    scores, second_scores = [], []
+    for run in _calibration_inputs(plan, contract, say):  # one run in memory at a time
+        steering = network_outputs(plan.model, run) if STEERING in inputs else None
+        scores.append(graph_scores(graph, run, steering=steering))
+        if second is not None:
+            second_scores.append(graph_scores(second, run))
+    if second is not None:
         first_alarm = calibrate(scores, plan.window, plan.warnings_per_hour, plan.alarms_per_hour).alarm
         second_alarm = calibrate(second_scores, plan.window, plan.warnings_per_hour, plan.alarms_per_hour).alarm
         say(f"combined with the frame statistics: each part divided by its own alarm threshold "
@@ -161,18 +166,26 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
     return FitResult(spec, int(record.get("train_frames", 0)), record)
 
 
-def _calibration_inputs(plan: FitPlan, contract: PreprocessContract, say: Callable[[str], None]) -> list[np.ndarray]:
-    """One input array per calibration run: recorded logs read as the server reads them, or the model's own
-    nominal runs of rbc monitor failures --set calibration (folders of run files; nominal runs only)."""
+def _calibration_inputs(plan: FitPlan, contract: PreprocessContract,
+                        say: Callable[[str], None]) -> Iterator[np.ndarray]:
+    """One input array per calibration run, one at a time: recorded logs read as the server reads them, or the
+    model's own nominal runs of rbc monitor failures --set calibration (folders of run files; nominal runs only)."""
     logs = [p for p in plan.calibration if not (Path(p).is_dir() and any(Path(p).glob("*.npz")))]
-    runs = load_runs(logs, contract, 1, progress=lambda d, t: _every_tenth(say, d, t)) if logs else []
+    runs = iter_runs(logs, contract, 1, progress=lambda d, t: _every_tenth(say, d, t)) if logs else iter(())
     driven = [p for p in plan.calibration if p not in logs]
-    for path in run_files(driven) if driven else []:
-        run = load_run(path)
-        if run.meta.get("group") != "nominal" or run.meta.get("seed_range", "train") != "train":
+    files = run_files(driven) if driven else []
+    for path in files:  # refused before any work
+        meta = load_meta(path)
+        if meta.get("group") != "nominal" or meta.get("seed_range", "train") != "train":
             raise BadValue(f"{path}: calibration takes nominal driving on training worlds only")
-        runs.extend(_uneventful(run.floats(), run.t, run.takeovers))
-    return runs
+    return _then_driven(runs, files)
+
+
+def _then_driven(logged: Iterator[np.ndarray], files: list[Path]) -> Iterator[np.ndarray]:
+    yield from logged
+    for path in files:
+        run = load_run(path)
+        yield from _uneventful(run.floats(), run.t, run.takeovers)
 
 
 #: Around a take-over in a calibration run the driving is not nominal: the 10 s before it (the benchmark's own
@@ -214,12 +227,14 @@ def _framestats(plan: FitPlan, contract: PreprocessContract, say: Callable[[str]
 
     say(f"reading nominal frames for the frame statistics from {len(plan.train)} folder(s) (every {plan.stride}. "
         f"frame)")
-    frames = np.concatenate(load_runs(list(plan.train), contract, plan.stride,
-                                      progress=lambda d, t: _every_tenth(say, d, t)))
-    mu, whiten = fit_framestats(frames, contract)
+    features = np.concatenate([frame_features(run, contract) for run in iter_runs(
+        list(plan.train), contract, plan.stride, progress=lambda d, t: _every_tenth(say, d, t))])
+    mu, whiten = fit_features(features)
     served = onnx.load(str(plan.model))
     opset = max(o.version for o in served.opset_import if o.domain in ("", "ai.onnx"))
-    record |= {"framestats_frames": int(len(frames)), "train": [p.name for p in plan.train]}
+    # beside another score, the other's training folders keep the name "train"
+    record |= {"framestats_frames": int(len(features)),
+               "framestats_train" if plan.with_framestats else "train": [p.name for p in plan.train]}
     return framestats_graph(contract, mu, whiten, opset=opset, ir_version=served.ir_version)
 
 

@@ -5,14 +5,14 @@ worlds.csv, else one per log), so calibration computes the same one-second means
 from __future__ import annotations
 
 import csv
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
 from drive_server.serving.contract import PreprocessContract
 from drive_server.serving.preprocess import jpeg_reduction, preprocess
-from protocol.datalog import find_log, read_log
+from protocol.datalog import Sample, find_log, read_log
 from protocol.errors import BadValue
 from protocol.jpeg import read_jpeg_file
 
@@ -37,8 +37,13 @@ def _world_spans(folder: Path, rows: int) -> list[tuple[int, int]]:
 def load_runs(folders: list[Path], contract: PreprocessContract, stride: int = 1,
               progress: Callable[[int, int], None] | None = None) -> list[np.ndarray]:
     """Preprocessed centre frames of every run in ``folders`` (every ``stride``-th frame), one array per run."""
-    reduce = jpeg_reduction(contract)
-    runs: list[np.ndarray] = []
+    return list(iter_runs(folders, contract, stride, progress))
+
+
+def iter_runs(folders: list[Path], contract: PreprocessContract, stride: int = 1,
+              progress: Callable[[int, int], None] | None = None) -> Iterator[np.ndarray]:
+    """:func:`load_runs` one run at a time: a large model input (PilotNet's 66x200 is 160 kB a frame, an hour of
+    driving 9 GB) never needs every run in memory at once. The folders are read (and refused) before the first run."""
     plan = []
     for folder in folders:
         folder = Path(folder)
@@ -48,6 +53,11 @@ def load_runs(folders: list[Path], contract: PreprocessContract, stride: int = 1
         base = folder if folder.is_dir() else folder.parent
         for first, last in _world_spans(base, len(samples)):
             plan.append(samples[first:last:stride])
+    return _read_runs(plan, contract, jpeg_reduction(contract), progress)
+
+
+def _read_runs(plan: list[list[Sample]], contract: PreprocessContract, reduce: int,
+               progress: Callable[[int, int], None] | None) -> Iterator[np.ndarray]:
     total, done = sum(len(p) for p in plan), 0
     for part in plan:
         frames = []
@@ -57,5 +67,4 @@ def load_runs(folders: list[Path], contract: PreprocessContract, stride: int = 1
             if progress is not None and done % 1000 == 0:
                 progress(done, total)
         if frames:
-            runs.append(np.stack(frames))
-    return runs
+            yield np.stack(frames)

@@ -46,9 +46,13 @@ def frame_features(frames: np.ndarray, contract: PreprocessContract) -> np.ndarr
 
 def fit_framestats(frames: np.ndarray, contract: PreprocessContract) -> tuple[np.ndarray, np.ndarray]:
     """``(mu, whiten)`` from nominal frames: ``||(f - mu) @ whiten||`` is the Mahalanobis distance."""
-    if len(frames) < MIN_FRAMES:
-        raise BadValue(f"the frame statistics need at least {MIN_FRAMES} nominal frames (--data), got {len(frames)}")
-    f = frame_features(frames, contract)
+    return fit_features(frame_features(frames, contract))
+
+
+def fit_features(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fit_framestats` from the frames' features (:func:`frame_features`), gathered run by run."""
+    if len(f) < MIN_FRAMES:
+        raise BadValue(f"the frame statistics need at least {MIN_FRAMES} nominal frames (--data), got {len(f)}")
     mu = f.mean(axis=0)
     cov = np.cov(f, rowvar=False)
     cov = cov + np.eye(len(cov)) * (SHRINK * float(np.trace(cov)) / len(cov) + 1e-12)
