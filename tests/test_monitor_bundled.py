@@ -64,3 +64,19 @@ def test_the_bundled_generalist_carries_the_ensemble_and_the_server_scores_it_wi
         sent = pipeline.run(parse_telemetry(frame.payload()), smoother, monitor)[0].steering
         assert monitor.last is not None and monitor.last.score == pytest.approx(want, abs=1e-6)
         assert sent == plain.run(parse_telemetry(frame.payload()), smoother_plain, None)[0].steering
+
+
+def test_the_demo_model_carries_the_camera_check_beside_its_autoencoder():
+    """generalist_pilotnet.onnx (rbc demo's model): the autoencoder and the frame statistics, each in units of its own
+    alarm threshold, calibrated on more than an hour of nominal laps; a washed-out frame scores above the frame."""
+    path = PRETRAINED / "generalist_pilotnet.onnx"
+    spec, graph = SteeringModel(path).monitor()
+    calibration = spec.calibration
+    assert spec.score == "autoencoder+framestats" and spec.inputs == (FRAME,)
+    assert [p["score"] for p in calibration["parts"]] == ["autoencoder", "framestats"]
+    assert calibration["hours"] >= 1.0 and 0 < spec.warn <= spec.alarm
+    model = SteeringModel(path)
+    rgb = decode_image(FRAMES[0].payload()["image"], reduce=1)
+    washed = np.clip(rgb.astype(np.float32) * 6, 0, 255).astype(np.uint8)
+    scores = [graph.score(preprocess(img, model.contract)) for img in (rgb, washed)]
+    assert scores[1] > max(1.0, 2 * scores[0])
