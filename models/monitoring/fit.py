@@ -5,6 +5,7 @@ runs, and write the steering model's file with the monitor attached."""
 from __future__ import annotations
 
 import logging
+import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +28,8 @@ from models.monitoring.failures import LabelRules, labels, load_meta, load_run, 
 from models.monitoring.frames import iter_runs, load_runs
 from models.monitoring.framestats import SCORE_NAME as FRAMESTATS
 from models.monitoring.framestats import combine_scores, fit_features, frame_features, framestats_graph
+from models.monitoring.mcdropout import DEFAULT_SAMPLES, dropout_members, dropout_rate
+from models.monitoring.mcdropout import SCORE_NAME as MCDROPOUT
 from models.monitoring.predictor import SCORE_NAME as PREDICTOR
 from models.monitoring.predictor import train_predictor
 from protocol.errors import BadValue
@@ -35,7 +38,7 @@ log = logging.getLogger(__name__)
 
 #: The scores ``rbc monitor fit`` can attach (``keep``: the model file's own monitor, calibrated afresh).
 KEEP = "keep"
-SCORES = (AUTOENCODER, SHIFT, PREDICTOR, ENSEMBLE, FRAMESTATS, KEEP)
+SCORES = (AUTOENCODER, SHIFT, PREDICTOR, ENSEMBLE, MCDROPOUT, FRAMESTATS, KEEP)
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,8 @@ class FitPlan:
     # "framestats": the frame's brightness and contrast against nominal frames' (--data; models.monitoring.framestats)
     score: str = AUTOENCODER
     members: tuple[Path, ...] = ()
+    # "mcdropout": the served network sampled with fixed dropout masks, as members (models.monitoring.mcdropout)
+    samples: int = DEFAULT_SAMPLES
     # also the frame statistics beside the score (fitted on ``train``): the larger of the two, each in units of its
     # own alarm threshold, so that either can warn (the ensemble is blind to washed-out frames, see framestats)
     with_framestats: bool = False
@@ -78,6 +83,8 @@ class FitPlan:
                            "file keeps), with nominal frames to fit it on (--data)")
         if self.members and self.score != ENSEMBLE:
             raise BadValue(f"members (--member) are for --score {ENSEMBLE}, not {self.score}")
+        if self.samples < 2:
+            raise BadValue(f"MC-dropout needs at least 2 samples (--samples), got {self.samples}")
         if self.epochs < 1 or self.stride < 1:
             raise BadValue(f"epochs and stride must be >= 1, got {self.epochs} and {self.stride}")
 
@@ -124,6 +131,14 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
         graph = ensemble_score_graph(plan.model, plan.members)
         inputs = (FRAME, STEERING)
         record |= {"members": members, "spread": True}
+    elif plan.score == MCDROPOUT:
+        rate = dropout_rate(plan.model)
+        say(f"building the MC-dropout monitor: {plan.samples} fixed masks at the network's dropout rate {rate:g}")
+        with tempfile.TemporaryDirectory(prefix="rbc_mcdropout_") as tmp:
+            samples = dropout_members(plan.model, Path(tmp), plan.samples, seed=plan.seed)
+            graph = ensemble_score_graph(plan.model, samples)
+        inputs = (FRAME, STEERING)
+        record |= {"samples": plan.samples, "dropout": rate, "spread": True}
     else:
         found = SteeringModel(plan.model).monitor()
         if found is None:
@@ -134,7 +149,7 @@ def fit_monitor(plan: FitPlan, say: Callable[[str], None] = log.info) -> FitResu
                            "--score keep without --with-framestats calibrates it afresh")
         graph, inputs = graph_obj.model_bytes, old.inputs
         kept = {k: v for k, v in old.calibration.items() if k in ("train_frames", "train", "epochs", "shift_pixels",
-                                                                 "seed", "members", "spread")}
+                                                                 "seed", "members", "spread", "samples", "dropout")}
         record |= {**kept, "score": old.score, "recalibrated": True}
     say(f"scoring the calibration runs from {len(plan.calibration)} folder(s)")
     second = _framestats(plan, contract, say, record) if plan.with_framestats else None

@@ -35,7 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                           "disagreement with itself on the frame moved 3 pixels sideways (no training); predictor: "
                           "how likely a failure is within 3 s, learnt from rbc monitor failures' runs (--data); "
                           "ensemble: the served steering's distance to the mean of other networks of the model's "
-                          "recipe (--member, two or more) plus their spread; framestats: the frame's brightness and "
+                          "recipe (--member, two or more) plus their spread; mcdropout: the same with the served "
+                          "network itself under --samples fixed dropout masks as the other networks (a network "
+                          "trained with dropout; no training); framestats: the frame's brightness and "
                           "contrast against nominal frames' (--data); keep: the "
                           "monitor MODEL already carries, its thresholds set afresh (default %(default)s)")
     fit.add_argument("--with-framestats", action="store_true",
@@ -49,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fit.add_argument("--member", dest="members", type=Path, action="append", default=[], metavar="M.onnx",
                      help="for --score ensemble: a steering model trained to MODEL's recipe with another seed "
                           "(rbc train --recipe R --seed N), with exactly MODEL's preprocessing (repeat, two or more)")
+    fit.add_argument("--samples", type=int, default=FitPlan.samples,
+                     help="for --score mcdropout: dropout masks, each one more run of the network per frame "
+                          "(default %(default)s)")
     fit.add_argument("--calibration", type=Path, action="append", required=True, metavar="DIR",
                      help="OTHER nominal driving to set the thresholds on, at least an hour for the default rates "
                           "(repeat; never evaluation worlds)")
@@ -189,8 +194,8 @@ def _fit(args: argparse.Namespace) -> int:
         if not folder.exists():
             raise CommandError(f"no such file or folder: {folder}")
     plan = FitPlan(args.model, args.out, tuple(args.data), tuple(args.calibration), score=args.score,
-                   members=tuple(args.members), with_framestats=args.with_framestats, epochs=args.epochs,
-                   stride=args.stride, seed=args.seed, warnings_per_hour=args.warnings_per_hour,
+                   members=tuple(args.members), samples=args.samples, with_framestats=args.with_framestats,
+                   epochs=args.epochs, stride=args.stride, seed=args.seed, warnings_per_hour=args.warnings_per_hour,
                    alarms_per_hour=args.alarms_per_hour)
     result = fit_monitor(plan, say=print)
     spec, cal = result.spec, result.info
