@@ -14,6 +14,7 @@ from models.data.behavior import Pipeline
 from models.data.framecache import FrameCache, build_cache
 from models.data.labels import centred_average
 from models.data.split import SplitKind, SplitSpec, make_split
+from models.data.turnround import turnround_rows
 from protocol.datalog import DataLogError, DataSet, read_logs
 from protocol.units import SpeedUnit, to_kmh
 
@@ -40,6 +41,9 @@ class DataOptions:
     centre_gain: float = 0.0
     # keep each sample's road middle (from the road files) for the edge pull of the augmentation
     road_middles: bool = False
+    # leave out the rows where the driver turned the car round (models.data.turnround): reversing pairs the
+    # picture with the opposite wheel
+    drop_turnround: bool = False
 
     def slow(self, speeds: np.ndarray) -> np.ndarray:
         """Rows slower than ``min_speed``, comparing both speeds in km/h."""
@@ -80,6 +84,8 @@ class PreparedData:
             slow = f"{c['slow']} dropped below {options.min_speed if options else 0:g}{unit}"
         else:
             slow = "no speed filter"
+        if c.get("turnround"):
+            slow += f", {c['turnround']} of turns round dropped"
         gap = f", {c['gap']} dropped beside held-out blocks" if c.get("gap") else ""
         if self.split.kind is SplitKind.RECORDINGS:
             gap = f": {c['val_recordings']} of {c['recordings']} recordings held out"
@@ -113,6 +119,8 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
     speeds = np.array([s.speed for s in dataset.samples], np.float64)
     slow = options.slow(speeds)
+    turnround = turnround_mask(dataset, recording, options)
+    slow = slow | turnround
     cache = build_cache(dataset.samples, pipeline.contract, cameras, workers=workers, progress=progress)
     usable = np.flatnonzero(cache.valid & ~slow)
     if len(usable) < 2:
@@ -129,7 +137,8 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
         log.warning("no sample has left and right frames: perspective shifts are skipped")
     counts = {"rows": sum(r.rows for r in dataset.reports), "stride": options.row_stride,
               "skipped": sum(len(r.skipped) for r in dataset.reports),
-              "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
+              "unreadable": int((~cache.valid).sum()), "slow": int((slow & ~turnround & cache.valid).sum()),
+              "turnround": int((turnround & cache.valid).sum()),
               "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
               "gap": int(len(usable) - len(train) - len(val)),
               "recordings": len(dataset.reports), "val_recordings": int(len(np.unique(recording[val])))}
@@ -174,6 +183,16 @@ def road_middles(dataset: DataSet, missing_ok: bool = False) -> np.ndarray:
     if missing:
         log.warning("%d of %d recordings have no %s and get no edge pull: %s", len(missing), len(middles), ROAD_FILE,
                     ", ".join(missing))
+    return out
+
+
+def turnround_mask(dataset: DataSet, recording: np.ndarray, options: DataOptions) -> np.ndarray:
+    """Per sample: a row of a turn round (nothing unless ``options.drop_turnround``), found in each log alone."""
+    out = np.zeros(len(dataset.samples), bool)
+    if options.drop_turnround:
+        for r in np.unique(recording).tolist():
+            rows = np.flatnonzero(recording == r)
+            out[rows] = turnround_rows([dataset.samples[i] for i in rows.tolist()], options.speed_unit)
     return out
 
 

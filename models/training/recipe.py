@@ -19,7 +19,7 @@ from typing import Any
 
 from models.networks.runfiles import RunRecord
 from models.training import knobs
-from models.training.train_config import REMOVED, RENAMED, RENAMED_IN_RECIPES, TrainConfig
+from models.training.train_config import ADDED_TO_RECIPES, REMOVED, RENAMED, RENAMED_IN_RECIPES, TrainConfig
 from protocol.errors import BadValue
 from protocol.runrecords import write_text
 
@@ -112,8 +112,13 @@ def recipe_sections(config: TrainConfig) -> dict[str, dict[str, object]]:
 
 
 def renamed_sections(sections: Mapping[str, Mapping[str, object]]) -> dict[str, dict[str, object]]:
-    """Recorded recipe ``sections`` (a run's record, a model file's) with their keys in today's names."""
-    return {section: {RENAMED.get(k, k): v for k, v in keys.items()} for section, keys in sections.items()}
+    """Recorded recipe ``sections`` (a run's record, a model file's) with their keys in today's names, and the keys
+    added since with what the run did without them."""
+    out = {section: {RENAMED.get(k, k): v for k, v in keys.items()} for section, keys in sections.items()}
+    for key, value in ADDED_TO_RECIPES.items():
+        if SECTION_OF[key] in out:
+            out[SECTION_OF[key]].setdefault(key, value)
+    return out
 
 
 def recipe_toml(config: TrainConfig, source: str | None = None) -> str:

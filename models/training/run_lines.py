@@ -26,6 +26,8 @@ def describe_data(data: PreparedData, config: TrainConfig) -> list[str]:
     stride = "every row" if c.get("stride", 1) == 1 else f"every {_ordinal(c['stride'])} row"
     slow = (f", leaving out {c['slow']} below {config.min_speed:g} {config.min_speed_unit}"
             if config.min_speed > 0 else "")
+    if config.drop_turnround:
+        slow += f", leaving out {c.get('turnround', 0)} of turns round"
     lines.append(f"used: {stride}{slow}: {c['kept']} frames")
     kind = SplitKind(data.split.kind)
     if kind is SplitKind.RECORDINGS:

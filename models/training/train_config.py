@@ -40,6 +40,8 @@ if TYPE_CHECKING:
 SCALE_BRIGHTNESS_RANGE = 0.5
 #: What a stored run without these keys did (runs written before they existed): the paper's split, last epoch.
 LEGACY = {"split": "random", "export": "last"}
+#: Recipe keys added since model files record their recipe, with what a recipe recorded before did without them.
+ADDED_TO_RECIPES = {"drop_turnround": False}
 #: Keys of stored runs renamed since (old -> new), so run configs written before still load.
 RENAMED = {"smooth_labels": "label_smoothing_frames", "serve_smooth": "smoothing", "serve_smoothing": "smoothing",
            "output_scale": "gain"}
@@ -103,6 +105,9 @@ class TrainConfig:
                                        range=Range(0, 1000, unit="frames"))
     row_stride: int = knob(DataOptions.row_stride, "data", "use every Nth row of the logs: neighbouring frames are "
                            "near-copies, the frame cache shrinks", range=Range(1, 1000))
+    drop_turnround: bool = knob(DataOptions.drop_turnround, "data", "leave out the rows where the driver turned the "
+                                "car round (reversing, then the full-lock leg forwards): the log's speed has no sign, "
+                                "so those rows pair the picture with the opposite wheel")
     balance_recordings: bool = knob(False, "data", "each recording gives a pass over the data at most the median "
                                     "recording's samples")
     centre_gain: float = knob(DataOptions.centre_gain, "data", "not in the paper: add this much steering per metre "

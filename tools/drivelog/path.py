@@ -17,30 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from models.data.turnround import log_timing, turning_round
 from protocol.datalog import Sample
 from protocol.errors import BadValue
 from protocol.facts import MAX_STEERING_DEG
-from protocol.stamps import frame_time, session_ids
 from protocol.units import SpeedUnit, to_kmh
 
 #: Wheelbase of the Udacity car, metres (a mid-size saloon; only scales how fast steering turns the car).
 WHEELBASE_M = 2.6
-#: Frame intervals beyond this are a pause (or a restart) of the recording: a new session starts.
-SESSION_GAP_S = 1.0
-#: Frame interval assumed where the names carry no time stamps (the simulator records at about 10 Hz).
-DEFAULT_DT_S = 0.1
-#: The recorded car reverses where its speed rises for at least this many frames running with the brake
-#: pressed: the log's speed is unsigned, and the Udacity car brakes only while it rolls forward faster than
-#: 5 mph; standing or rolling back, the brake key drives it backwards (its CarController's reverse torque).
-#: Braking forward only ever slows the car; three frames (0.3 s) keep a moment's jitter of the speed out.
-REVERSE_MIN_FRAMES = 3
-#: ... and the speed rises by at least this much over them (m/s; reversing from a standstill gains about
-#: 0.15 m/s a frame, the least rise seen under the brake on a forward slope was 0.05 m/s over 3 frames).
-REVERSE_MIN_GAIN_MPS = 0.4
-#: Turning round ends with a leg forwards at full lock (|steering| at least this; keyboard ramps reach 1.0 in 3
-#: frames): the person who reversed completes the turn and hands back once the wheel comes off the lock.
-REVERSE_LEG_LOCK = 0.9
-
 
 
 def curvature(steering: np.ndarray | float, wheelbase_m: float = WHEELBASE_M) -> np.ndarray:
@@ -82,15 +66,7 @@ def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUni
     """Rebuild the path of a log's centre frames (rows without a centre frame are not in ``samples``)."""
     if not samples:
         raise BadValue("the log has no rows with a centre frame")
-    times = [frame_time(s.center) for s in samples]
-    session = np.array(session_ids(times, SESSION_GAP_S), np.int64)
-    dt = np.full(len(samples), DEFAULT_DT_S)
-    for i in range(len(samples) - 1):
-        a, b = times[i], times[i + 1]
-        if a is not None and b is not None and session[i] == session[i + 1]:
-            dt[i] = min(max(b - a, 0.0), SESSION_GAP_S)
-    last_of_session = np.r_[session[1:] != session[:-1], True]
-    dt[last_of_session] = 0.0
+    session, dt = log_timing(samples)
     speed = to_kmh(np.array([s.speed for s in samples], np.float64), speed_unit) / 3.6
     step = speed * dt
     arc = np.zeros(len(samples))
@@ -103,39 +79,12 @@ def recorded_drive(samples: list[Sample], speed_unit: SpeedUnit | str = SpeedUni
 
 
 def reversing(drive: RecordedDrive) -> np.ndarray:
-    """Per frame: the recorded driver was turning round: reversing (standing just before, rolling back just
-    after it) and the leg forwards at full lock that completes the turn.
-
-    The log's speed has no sign, so :func:`recorded_drive` rebuilds a reversing car as one driving forward,
-    turning the other way. A car whose speed rises with the brake pressed is reversing
-    (:data:`REVERSE_MIN_FRAMES`, :data:`REVERSE_MIN_GAIN_MPS`); the stretch runs back to the standstill it
-    started from, and on while the brake is held and until the car, the brake let go, has stopped rolling
-    back (the speed's lowest point on either side, within the session), and on while the wheel stays at full
-    lock (:data:`REVERSE_LEG_LOCK`)."""
-    n = len(drive)
-    out = np.zeros(n, bool)
-    if drive.brake is None or n < 2:
-        return out
-    rising = np.r_[(drive.brake[:-1] > 0) & (np.diff(drive.speed) > 0) & (drive.dt[:-1] > 0), False]
-    start = None
-    for i, flag in enumerate([*rising, False]):
-        if flag and start is None:
-            start = i
-        elif not flag and start is not None:
-            end = i  # the frame the rise ended at
-            if end - start >= REVERSE_MIN_FRAMES and drive.speed[end] - drive.speed[start] >= REVERSE_MIN_GAIN_MPS:
-                a, b = start, end
-                while a > 0 and drive.session[a - 1] == drive.session[a] and drive.speed[a - 1] <= drive.speed[a]:
-                    a -= 1  # back to the standstill it started from
-                while b + 1 < n and drive.session[b + 1] == drive.session[b] and (
-                        drive.speed[b + 1] <= drive.speed[b] or drive.brake[b] > 0):
-                    b += 1  # on while the brake drives it backwards, and until it has stopped rolling back
-                while b + 1 < n and drive.session[b + 1] == drive.session[b] and \
-                        abs(drive.steering[b + 1]) >= REVERSE_LEG_LOCK:
-                    b += 1  # the leg forwards at full lock that completes the turn
-                out[a:b + 1] = True
-            start = None
-    return out
+    """Per frame: the recorded driver was turning round (:func:`models.data.turnround.turning_round`); the log's
+    speed has no sign, so :func:`recorded_drive` rebuilds a reversing car as one driving forward, turning the other
+    way. Nothing where the brake is not known."""
+    if drive.brake is None:
+        return np.zeros(len(drive), bool)
+    return turning_round(drive.steering, drive.speed, drive.brake, drive.dt, drive.session)
 
 
 def running_median(values: np.ndarray, frames: int) -> np.ndarray:
