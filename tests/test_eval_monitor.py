@@ -15,7 +15,7 @@ from tools.evaluate.monitor import run_monitor, summarize_monitor
 from tools.evaluate.runner import DriverSpec, Task, run_task
 
 PRETRAINED = Path(__file__).resolve().parents[1] / "models" / "pretrained"
-GENERALIST = PRETRAINED / "generalist.onnx"  # carries an ensemble monitor (two member networks)
+GENERALIST = PRETRAINED / "generalist.onnx"  # carries MC-dropout (four masked copies) and the frame statistics
 HEADS = "% warn/alarm"
 
 
@@ -35,10 +35,12 @@ def test_warn_adds_the_monitor_columns_and_figures(tmp_path, track):
     out = tmp_path / "warn"
     proc = _eval(track, out, "--monitor", "warn")
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert HEADS in proc.stdout and "foreseen ≥1 s" in proc.stdout and "monitor ensemble (warn)" in proc.stdout
+    assert HEADS in proc.stdout and "foreseen ≥1 s" in proc.stdout
+    assert "monitor mcdropout+framestats (warn)" in proc.stdout
     results = json.loads((out / "results.json").read_text())
     monitor = results["meta"]["monitor"]
-    assert monitor["mode"] == "warn" and monitor["score"] == "ensemble" and 0 < monitor["warn"] <= monitor["alarm"]
+    assert monitor["mode"] == "warn" and monitor["score"] == "mcdropout+framestats"
+    assert 0 < monitor["warn"] <= monitor["alarm"]
     [run] = results["runs"]
     assert run["frames"] - 1 <= run["monitor"]["frames_scored"] <= run["frames"]  # every frame steered is scored
     assert run["monitor"]["scored_s"] == pytest.approx(run["sim_time_s"], abs=0.2)

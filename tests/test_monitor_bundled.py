@@ -1,5 +1,5 @@
 """#53: the monitors the bundled model files carry: the single-input autoencoders read and score exactly as stored,
-and generalist.onnx's ensemble is scored by the server with the served network's own steering, its steering
+and generalist.onnx's MC-dropout is scored by the server with the served network's own steering, its steering
 untouched."""
 
 from __future__ import annotations
@@ -42,15 +42,17 @@ def test_the_bundled_single_input_monitors_read_and_score_as_before(name):
         assert monitor.last is not None and monitor.last.score == want
 
 
-def test_the_bundled_generalist_carries_the_ensemble_and_the_server_scores_it_with_the_networks_steering():
-    """generalist.onnx's monitor is the benchmarked ensemble: two member networks in its graph, calibrated on
-    nominal laps of training worlds; drive_server's score is that graph's answer on the frame and the served
-    network's own steering (before smoothing), bit for bit; its steering is the network's as without a monitor."""
+def test_the_bundled_generalist_carries_mcdropout_and_the_server_scores_it_with_the_networks_steering():
+    """generalist.onnx's monitor is the benchmarked one: MC-dropout (four masked copies of its network in the graph)
+    beside the frame statistics, calibrated on more than an hour of nominal laps of training worlds; drive_server's
+    score is that graph's answer on the frame and the served network's own steering (before smoothing); its
+    steering is the network's as without a monitor."""
     meta = {p.key: p.value for p in onnx.load(str(GENERALIST)).metadata_props}
     spec, graph = SteeringModel(GENERALIST).monitor()
-    assert spec.score == "ensemble" and spec.inputs == (FRAME, STEERING) and graph.wants_steering
+    assert spec.score == "mcdropout+framestats" and spec.inputs == (FRAME, STEERING) and graph.wants_steering
     calibration = json.loads(meta[MONITOR_KEY])["calibration"]
-    assert len(calibration["members"]) == 2 and calibration["hours"] >= 1.0 and 0 < spec.warn <= spec.alarm
+    assert calibration["samples"] == 4 and [p["score"] for p in calibration["parts"]] == ["mcdropout", "framestats"]
+    assert calibration["hours"] >= 1.0 and 0 < spec.warn <= spec.alarm
     session = ort.InferenceSession(base64.b64decode(meta["rbc.monitor.onnx"]), providers=["CPUExecutionProvider"])
     names = [i.name for i in session.get_inputs()]
     model = SteeringModel(GENERALIST)

@@ -156,25 +156,29 @@ def test_a_framestats_fit_without_what_it_needs_is_one_line(extra, problem, tmp_
 
 
 def test_keep_with_framestats_puts_the_camera_check_beside_the_monitor_a_file_carries(tmp_path, capsys):
-    """How the bundled files got theirs: the carried monitor (here the generalist's ensemble) calibrated afresh
-    beside the frame statistics; its own record survives, and a file that has the camera check refuses a second."""
+    """How the bundled files got theirs: the carried monitor (here MC-dropout of the generalist's network) calibrated
+    afresh beside the frame statistics; its own record survives, and a file that has the camera check (the bundled
+    generalist too) refuses a second."""
     from tools.cli import main
 
     calibration = _calibration_set(tmp_path / "calibration")
-    out = tmp_path / "kept.onnx"
+    carried, out = tmp_path / "mcd.onnx", tmp_path / "kept.onnx"
+    assert main(["monitor", "fit", str(GENERALIST), "--score", "mcdropout", "--calibration", str(calibration),
+                 "--out", str(carried)]) == 0
     base = ["monitor", "fit", "--score", "keep", "--with-framestats", "--data", str(SAMPLE_LOG), "--stride", "1",
             "--calibration", str(calibration), "--out"]
-    assert main([*base[:2], str(GENERALIST), *base[2:], str(out)]) == 0
+    assert main([*base[:2], str(carried), *base[2:], str(out)]) == 0
     spec, graph = SteeringModel(out).monitor()
-    old, _ = SteeringModel(GENERALIST).monitor()
-    assert spec.score == "ensemble+framestats" and spec.inputs == old.inputs and graph.wants_steering
-    assert spec.calibration["members"] == old.calibration["members"] and spec.calibration["recalibrated"]
+    old, _ = SteeringModel(carried).monitor()
+    assert spec.score == "mcdropout+framestats" and spec.inputs == old.inputs and graph.wants_steering
+    assert spec.calibration["samples"] == old.calibration["samples"] and spec.calibration["recalibrated"]
     assert spec.calibration["framestats_train"] == [SAMPLE_LOG.name]
-    capsys.readouterr()
-    assert main([*base[:2], str(out), *base[2:], str(tmp_path / "twice.onnx")]) == 2
-    err = capsys.readouterr().err
-    assert "has the frame statistics already" in err and len(err.strip().splitlines()) == 1
-    assert not (tmp_path / "twice.onnx").exists()
+    for twice in (out, GENERALIST):
+        capsys.readouterr()
+        assert main([*base[:2], str(twice), *base[2:], str(tmp_path / "twice.onnx")]) == 2
+        err = capsys.readouterr().err
+        assert "has the frame statistics already" in err and len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "twice.onnx").exists()
 
 
 def test_calibration_frames_are_read_one_run_at_a_time_and_a_bad_folder_is_refused_first(tmp_path):

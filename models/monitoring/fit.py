@@ -79,8 +79,8 @@ class FitPlan:
             raise BadValue("give calibration data (--calibration), and for the autoencoder, the predictor and the "
                            "frame statistics training data (--data)")
         if self.with_framestats and (self.score in (FRAMESTATS, PREDICTOR) or not self.train):
-            raise BadValue("--with-framestats goes beside the autoencoder, shift or ensemble score (or the one the "
-                           "file keeps), with nominal frames to fit it on (--data)")
+            raise BadValue("--with-framestats goes beside the autoencoder, shift, ensemble or MC-dropout score (or "
+                           "the one the file keeps), with nominal frames to fit it on (--data)")
         if self.members and self.score != ENSEMBLE:
             raise BadValue(f"members (--member) are for --score {ENSEMBLE}, not {self.score}")
         if self.samples < 2:
