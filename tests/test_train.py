@@ -61,8 +61,8 @@ def test_run_directory_contents(run) -> None:
     assert record["resolved"]["val_samples"] == 7 and record["resolved"]["steps_per_epoch"] == 3
     assert record["config"]["split"] == "blocks" and record["resolved"]["split"]["kind"] == "blocks"
     assert record["config"]["export"] == "best" and record["result"]["export"] == "best"
-    assert record["rows"] == {"rows": 36, "stride": 1, "skipped": 0, "unreadable": 0, "slow": 0, "kept": 36,
-                              "train": 28, "val": 7, "gap": 1, "recordings": 1, "val_recordings": 1}
+    assert record["rows"] == {"rows": 36, "stride": 1, "skipped": 0, "unreadable": 0, "slow": 0, "turnround": 0,
+                              "kept": 36, "train": 28, "val": 7, "gap": 1, "recordings": 1, "val_recordings": 1}
     assert record["logs"] == [{"path": str((SAMPLE / "driving_log.csv").resolve()), "rows": 36, "samples": 36,
                                "skipped": 0}]
     assert record["augment"]["perspective"] == 0.5 and record["contract"]["width"] == 64
