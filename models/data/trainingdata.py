@@ -118,15 +118,14 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
     recording = recording_ids(dataset)
     cameras = ("center", "left", "right") if pipeline.augment.uses_side_cameras else ("center",)
     speeds = np.array([s.speed for s in dataset.samples], np.float64)
-    slow = options.slow(speeds)
     turnround = turnround_mask(dataset, recording, options)
-    slow = slow | turnround
+    slow = options.slow(speeds) & ~turnround  # a slow row of a turn round is counted as the turn's
     cache = build_cache(dataset.samples, pipeline.contract, cameras, workers=workers, progress=progress)
-    usable = np.flatnonzero(cache.valid & ~slow)
+    keep = cache.valid & ~slow & ~turnround
+    usable = np.flatnonzero(keep)
     if len(usable) < 2:
         raise DataLogError(f"only {len(usable)} samples with readable frames"
                            f"{' at or above the minimum speed' if slow.any() else ''} in {dataset.logs}")
-    keep = cache.valid & ~slow
     train, val = train[keep[train]], val[keep[val]]
     if not len(train) or not len(val):
         raise DataLogError(f"{len(train)} training and {len(val)} validation samples left in {dataset.logs}: "
@@ -137,7 +136,7 @@ def prepare_data(data: Sequence[Path | str], pipeline: Pipeline, seed: int, opti
         log.warning("no sample has left and right frames: perspective shifts are skipped")
     counts = {"rows": sum(r.rows for r in dataset.reports), "stride": options.row_stride,
               "skipped": sum(len(r.skipped) for r in dataset.reports),
-              "unreadable": int((~cache.valid).sum()), "slow": int((slow & ~turnround & cache.valid).sum()),
+              "unreadable": int((~cache.valid).sum()), "slow": int((slow & cache.valid).sum()),
               "turnround": int((turnround & cache.valid).sum()),
               "kept": int(len(usable)), "train": int(len(train)), "val": int(len(val)),
               "gap": int(len(usable) - len(train) - len(val)),
