@@ -19,6 +19,19 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_all_start_methods, get_context
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from gymnasium.vector import AsyncVectorEnv
+
+
+@dataclass(frozen=True)
+class VectorTiming:
+    """The vector env's wall-clock rate and each process's CPU time, for one way of placing the workers."""
+
+    steps_per_s: float  # env steps per second, wall clock
+    worker_cpu_ms: tuple[float, ...]  # each worker's CPU ms per env step
+    main_cpu_ms: float  # the main process's CPU ms per vector step
 
 
 @dataclass(frozen=True)
@@ -33,6 +46,7 @@ class VectorBenchResult:
     worker_peak_rss_mb: tuple[float, ...]
     worker_pss_mb: tuple[float, ...]  # each worker's proportional share of memory at the end
     main_pss_mb: tuple[float, ...]  # the main process's (empty where it cannot be read)
+    pinned: VectorTiming | None = None  # the same workers then pinned to a CPU each (tools.envs.pin_workers)
 
     @property
     def scaling(self) -> float:
@@ -53,15 +67,21 @@ class VectorBenchResult:
         def mb(values: tuple[float, ...]) -> str:
             return ", ".join(f"{v:,.0f}" for v in values) or "-"
 
-        return [
+        lines = [
             f"one env:              {self.one_steps_per_s:>8,.0f} steps/s wall, {self.one_cpu_ms:.3f} CPU ms/step",
             f"AsyncVectorEnv x{self.envs}:   {self.vector_steps_per_s:>8,.0f} env steps/s wall "
             f"({self.scaling:.2f}x one env); CPU ms per env step by worker: {ms(self.worker_cpu_ms)}; "
             f"main process {self.main_cpu_ms:.3f} CPU ms per vector step (the CPU times allow "
             f"{self.cpu_bound:.2f}x)",
-            f"memory by worker:     peak RSS {mb(self.worker_peak_rss_mb)} MB, PSS {mb(self.worker_pss_mb)} MB "
-            f"(main process PSS {mb(self.main_pss_mb)} MB)",
         ]
+        if self.pinned is not None:
+            p = self.pinned
+            lines.append(f"  workers pinned:     {p.steps_per_s:>8,.0f} env steps/s wall "
+                         f"({p.steps_per_s / self.one_steps_per_s:.2f}x one env; tools.envs.pin_workers); CPU ms "
+                         f"per env step by worker: {ms(p.worker_cpu_ms)}; main process {p.main_cpu_ms:.3f}")
+        lines.append(f"memory by worker:     peak RSS {mb(self.worker_peak_rss_mb)} MB, PSS "
+                     f"{mb(self.worker_pss_mb)} MB (main process PSS {mb(self.main_pss_mb)} MB)")
+        return lines
 
 
 def bench_vector(track: str = "lake", envs: int = 2, steps: int = 2000, warmup: int = 100, seed: int = 0,
@@ -76,6 +96,7 @@ def _bench_vector(track: str, envs: int, steps: int, warmup: int, seed: int, obs
     import numpy as np
 
     import tools.envs  # noqa: F401  (registers rbc/Drive-v0)
+    from tools.envs.affinity import pin_workers
 
     def make() -> gym.Env[np.ndarray, np.ndarray]:  # the module path: a spawned worker imports and registers it
         return gym.make("tools.envs:rbc/Drive-v0", track=track, observation=observation)
@@ -88,13 +109,12 @@ def _bench_vector(track: str, envs: int, steps: int, warmup: int, seed: int, obs
         for _ in range(warmup):
             _, _, _, _, infos = vec.step(infos["expert_action"])
         pids = [process.pid for process in vec.processes]
-        w0 = [_cpu_s(pid) for pid in pids]
-        t0, c0 = time.perf_counter(), time.process_time()
-        for _ in range(steps):
-            _, _, _, _, infos = vec.step(infos["expert_action"])
-        wall, main_cpu = time.perf_counter() - t0, time.process_time() - c0
-        worker_cpu = tuple(1000.0 * (end - start) / steps for start, end in zip(w0, map(_cpu_s, pids), strict=True)
-                           if start is not None and end is not None)
+        free, infos = _time_vector(vec, infos, pids, steps)
+        pinned = None
+        if pin_workers(vec):
+            for _ in range(warmup):  # the workers settle on their CPUs
+                _, _, _, _, infos = vec.step(infos["expert_action"])
+            pinned, infos = _time_vector(vec, infos, pids, steps)
         peaks = tuple(v for v in (_status_mb(pid, "VmHWM") for pid in pids) if v is not None)
         pss = tuple(v for v in (_pss_mb(pid) for pid in [*pids, os.getpid()]) if v is not None)
     finally:
@@ -113,8 +133,20 @@ def _bench_vector(track: str, envs: int, steps: int, warmup: int, seed: int, obs
             _, info = one.reset()
     one_wall, one_cpu = time.perf_counter() - t0, time.process_time() - c0
     one.close()
-    return VectorBenchResult(envs, steps, steps / one_wall, 1000.0 * one_cpu / steps, envs * steps / wall,
-                             worker_cpu, 1000.0 * main_cpu / steps, peaks, pss[:len(pids)], pss[len(pids):])
+    return VectorBenchResult(envs, steps, steps / one_wall, 1000.0 * one_cpu / steps, free.steps_per_s,
+                             free.worker_cpu_ms, free.main_cpu_ms, peaks, pss[:len(pids)], pss[len(pids):], pinned)
+
+
+def _time_vector(vec: AsyncVectorEnv, infos: dict, pids: list[int | None], steps: int) -> tuple[VectorTiming, dict]:
+    """``steps`` vector steps of ``vec``, the autopilot driving: its timing, and the last infos."""
+    w0 = [_cpu_s(pid) for pid in pids]
+    t0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        _, _, _, _, infos = vec.step(infos["expert_action"])
+    wall, main_cpu = time.perf_counter() - t0, time.process_time() - c0
+    worker_cpu = tuple(1000.0 * (end - start) / steps for start, end in zip(w0, map(_cpu_s, pids), strict=True)
+                       if start is not None and end is not None)
+    return VectorTiming(len(pids) * steps / wall, worker_cpu, 1000.0 * main_cpu / steps), infos
 
 
 def _cpu_s(pid: int | None) -> float | None:

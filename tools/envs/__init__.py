@@ -52,13 +52,16 @@ and ``terminal_expert_action`` the terminal one (``terminal_observation``).
 :class:`OnnxPolicy` drives it with a model from ``rbc train`` through drive_server's pipeline:
 ``policy = OnnxPolicy("models/pretrained/generalist.onnx"); action = policy(obs, info)``. :class:`ExpertPolicy`
 is the autopilot as a policy bound to the env(s) it labels: SB3's ``predict``, imitation's policy callable and
-(``.sb3()``) an SB3 ``BasePolicy``.
+(``.sb3()``) an SB3 ``BasePolicy``. :func:`pin_workers` puts each worker of a vector env (Gymnasium's
+``AsyncVectorEnv``, SB3's ``SubprocVecEnv``) on a CPU of its own, which a sleeping-and-waking worker needs to keep
+its caches (Linux).
 """
 
 from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+from tools.envs.affinity import pin_workers
 from tools.envs.config import DriveEnvConfig, RewardConfig
 from tools.envs.drive_env import DriveEnv
 from tools.envs.expert import ExpertPolicy
@@ -70,4 +73,5 @@ ENV_ID = "rbc/Drive-v0"
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="tools.envs.drive_env:make")  # DriveEnv; "human": in a window
 
-__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardConfig", "WorldDistribution"]
+__all__ = ["ENV_ID", "DriveEnv", "DriveEnvConfig", "ExpertPolicy", "OnnxPolicy", "RewardConfig", "WorldDistribution",
+           "pin_workers"]

@@ -18,8 +18,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from protocol import SpeedUnit, SteerCommand, encode_telemetry, parse_number
-from protocol.jpeg import decode_jpeg, encode_jpeg
+from protocol.jpeg import encode_jpeg
 from protocol.units import from_kmh, to_kmh
+from tools.envs.wire_jpeg import wire_decoder
 from tools.envs.worldcache import BuiltWorld, WorldKey, release_albedo, with_fog
 from tools.sim.driving.autopilot import Autopilot, AutopilotParams
 from tools.sim.driving.rules import angle_diff
@@ -194,9 +195,10 @@ class HeadlessSimClient:
 
     def wire(self, rgb: np.ndarray) -> tuple[np.ndarray, bytes]:
         """A frame as it arrives over the wire: JPEG at the track's quality (75 like Unity's), decoded by THE
-        decode (``protocol.jpeg``), and its JPEG bytes; with ``jpeg=False`` the rendered frame and no bytes."""
+        decode's pixels (:func:`tools.envs.wire_jpeg.wire_decoder`), and its JPEG bytes; with ``jpeg=False`` the
+        rendered frame and no bytes."""
         data = self.encode(rgb)
-        return (decode_jpeg(data), data) if data else (rgb, data)
+        return (wire_decoder()(data, 1), data) if data else (rgb, data)
 
     def encode(self, rgb: np.ndarray) -> bytes:
         """The frame's JPEG as the wire would carry it (the track's quality); ``b""`` with ``jpeg=False``."""

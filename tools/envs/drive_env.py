@@ -8,6 +8,7 @@ telemetry reports), the simulator runs it, and the observation is the next camer
 from __future__ import annotations
 
 import importlib.util
+import math
 from collections import deque
 from dataclasses import replace
 from pathlib import Path
@@ -21,11 +22,11 @@ from gymnasium import spaces
 from drive_server.serving.preprocess import frame_to_network_image, jpeg_reduction
 from protocol import CAMERAS, FRAME_HEIGHT, FRAME_WIDTH, SteerCommand
 from protocol.errors import BadValue, UserError
-from protocol.jpeg import decode_jpeg
 from tools.envs.client import Episode, HeadlessSimClient
 from tools.envs.config import config_from_kwargs, resolve_track, steer_command
 from tools.envs.reset_options import check_reset_options
 from tools.envs.rotation import WorldRotation
+from tools.envs.wire_jpeg import wire_decoder
 from tools.envs.worldcache import shared_cache
 
 if TYPE_CHECKING:
@@ -180,11 +181,11 @@ class DriveEnv(gym.Env):
         """The steer command an action asks for: steering as given; throttle and brake from Eq. 14 on the
         telemetry speed (``control="steer"``, as drive_server's pipeline computes them) or the second action,
         cut to 0 at the speed limit (``control="steer_throttle"``)."""
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != self.action_space.shape or not np.isfinite(a).all():
+        parts = np.asarray(action, dtype=np.float64).reshape(-1).tolist()  # floats: per-step numbers in plain Python
+        if len(parts) != self.action_space.shape[0] or not all(map(math.isfinite, parts)):
             raise BadValue(f"action must be {self.action_space.shape[0]} finite number(s) in [-1, 1], got {action!r}")
-        a = np.clip(a, -1.0, 1.0)
-        return steer_command(float(a[0]), float(a[1]) if len(a) > 1 else None, self.config.control, self.law,
+        steering, *throttle = (min(1.0, max(-1.0, v)) for v in parts)
+        return steer_command(steering, throttle[0] if throttle else None, self.config.control, self.law,
                              self.client.wire_speed_kmh())
 
     def expert_action(self) -> np.ndarray:
@@ -230,7 +231,7 @@ class DriveEnv(gym.Env):
         for name, rgb in frames.items():
             if model:
                 data = self.client.encode(rgb)
-                image = decode_jpeg(data, self._reduce) if data else rgb  # as drive_server decodes for the model
+                image = wire_decoder()(data, self._reduce) if data else rgb  # drive_server's pixels for the model
                 seen[name] = frame_to_network_image(image, self.contract)
             else:
                 seen[name], data = self.client.wire(rgb)

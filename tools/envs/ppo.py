@@ -98,6 +98,10 @@ def train_ppo(recipe: PPORecipe, out: str | Path, progress: bool = False) -> Pat
     if recipe.envs > 1 and recipe.worlds is None:
         make().close()  # the track's world built here, once: the forked workers share it (read-only pages)
     envs = SubprocVecEnv([make] * recipe.envs, start_method="fork") if recipe.envs > 1 else DummyVecEnv([make])
+    if isinstance(envs, SubprocVecEnv):
+        from tools.envs.affinity import pin_workers
+
+        pin_workers(envs)  # each worker keeps a core and its caches (the same episodes: placement is not a draw)
     vec = VecMonitor(envs, str(out / "monitor.csv"))
     vec.seed(recipe.seed)
     model = PPO("MultiInputPolicy", vec, n_steps=recipe.n_steps, batch_size=recipe.batch_size,

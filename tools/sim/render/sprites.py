@@ -218,10 +218,9 @@ class PropPainter:
         sun_cam = axes @ self.sun_vector
         sun2 = sun_cam[:2] / max(math.hypot(sun_cam[0], sun_cam[1]), 1e-6)
         rad = scale * self.crown[sel] / z
-        centre = px[:, 4]
-        crown = [((int(c[0]), int(c[1])), int(r)) for c, r in zip(centre.tolist(), rad.tolist(), strict=True)]
-        nudge = 0.3 * rad  # the highlights' offsets, worked out for the few near broadleaves that have one
-        lit_right = bool(sun2[0] > 0)
+        centres, radii = px[:, 4].tolist(), rad.tolist()
+        sun_x, sun_y = sun2.tolist()
+        lit_right = sun_x > 0
         recipe = (self.kind[sel] * 4 + (z < LOD_DIST) * 2 + int(lit_right)).tolist()
         min_hi = 3 << SHIFT
         for i in np.argsort(-z, kind="stable").tolist():
@@ -232,10 +231,11 @@ class PropPainter:
                 elif shape == FIR:
                     cv2.fillPoly(img, [p[a:b]], c[slot], cv2.LINE_AA, SHIFT)
                 elif shape == CROWN:
-                    cv2.circle(img, crown[i][0], crown[i][1], c[slot], -1, cv2.LINE_AA, SHIFT)
-                elif crown[i][1] > min_hi:
-                    hi = np.round(centre[i] + sun2 * nudge[i]).astype(np.int64).tolist()
-                    cv2.circle(img, tuple(hi), int(crown[i][1] * 0.68), c[slot], -1, cv2.LINE_AA, SHIFT)
+                    cv2.circle(img, tuple(centres[i]), int(radii[i]), c[slot], -1, cv2.LINE_AA, SHIFT)
+                elif int(radii[i]) > min_hi:  # the highlight, nudged towards the sun (as NumPy rounds: half to even)
+                    (x, y), nudge = centres[i], 0.3 * radii[i]
+                    cv2.circle(img, (round(x + sun_x * nudge), round(y + sun_y * nudge)), int(int(radii[i]) * 0.68),
+                               c[slot], -1, cv2.LINE_AA, SHIFT)
 
     def _draw_rails(self, fb: np.ndarray, cam: CameraModel, pos: np.ndarray, axes: np.ndarray, intensity: float,
                     haze: np.ndarray) -> None:
