@@ -57,6 +57,8 @@ API: tuple[str, ...] = (
     "tools.envs.config:RewardConfig",
     "tools.envs.expert:ExpertPolicy",
     "tools.envs.policy:OnnxPolicy",
+    "tools.envs.worlds:WorldDistribution",
+    "tools.envs.affinity:pin_workers",
 )
 
 
