@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
+from drive_server.observing.ring import SampleRing
+
 if TYPE_CHECKING:
     from drive_server.serving.client_monitor import ClientMonitor
 
@@ -40,8 +42,7 @@ class MonitorTally:
         self.states = dict.fromkeys(STATES, 0)
         self.episodes = dict.fromkeys(STATES[1:], 0)
         self.switched_off = 0
-        self.recorded = 0
-        self._ring = np.zeros((min(capacity, _INITIAL_ROWS), len(COLUMNS)), np.float32)
+        self._ring = SampleRing(len(COLUMNS), capacity, _INITIAL_ROWS)
         self._seen_off = False
         self._level = 0  # the state of the last frame noted, for counting entries
 
@@ -58,10 +59,7 @@ class MonitorTally:
             self.episodes[STATES[level]] += 1
         self._level = level
         self.states[STATES[level]] += 1
-        if self.recorded == len(self._ring) < self.capacity:  # grow until the ring is full size
-            self._ring = np.concatenate([self._ring, np.zeros_like(self._ring[: self.capacity - len(self._ring)])])
-        self._ring[self.recorded % len(self._ring)] = (reading.score, monitor.seconds)
-        self.recorded += 1
+        self._ring.add((reading.score, monitor.seconds))
 
     @property
     def frames(self) -> int:
@@ -69,8 +67,7 @@ class MonitorTally:
 
     def samples(self) -> np.ndarray:
         """The retained frames' (score, seconds), oldest first."""
-        start = max(self.recorded - len(self._ring), 0)
-        return self._ring[np.arange(start, self.recorded) % len(self._ring)]
+        return self._ring.samples()
 
     def counters(self) -> dict[str, object]:
         return {"states": dict(self.states), "episodes": dict(self.episodes), "switched_off": self.switched_off}
@@ -86,9 +83,8 @@ class MonitorTally:
     @classmethod
     def restore(cls, samples: np.ndarray, counters: dict[str, object] | None) -> MonitorTally:
         """The tally saved as ``samples`` and ``counters`` (a worker process's hand-back)."""
-        rows = np.asarray(samples, np.float32).reshape(-1, len(COLUMNS))
-        tally = cls(max(1, len(rows)))
-        tally._ring, tally.recorded = rows if len(rows) else tally._ring, len(rows)
+        tally = cls(max(1, len(np.asarray(samples).reshape(-1, len(COLUMNS)))))
+        tally._ring = SampleRing.of(samples, len(COLUMNS))
         c = counters or {}
         for key, into in (("states", tally.states), ("episodes", tally.episodes)):
             found = c.get(key)

@@ -16,6 +16,7 @@ from typing import NotRequired, TypedDict
 import numpy as np
 
 from drive_server.observing.monitor_stats import MonitorSummary, MonitorTally, monitor_line, summarize_monitor
+from drive_server.observing.ring import SampleRing
 from protocol.runrecords import atomic_path
 
 #: Pipeline stages, in order; ``total`` is handler entry to reply queued.
@@ -48,15 +49,16 @@ class LatencyStats:
         self.bad_input: dict[str, int] = {}  # ``malformed`` by kind of bad input (image, number, payload, json)
         self.bad_output = 0  # frames answered by the fallback policy because the MODEL's output was not finite
         self.capacity = capacity
-        self.recorded = 0  # frames whose timings went into the ring (``frames`` may also count others)
-        self._ring = np.zeros((min(capacity, _INITIAL_ROWS), len(STAGES)), np.float32)
+        self._ring = SampleRing(len(STAGES), capacity, _INITIAL_ROWS)
         self.monitor = MonitorTally(capacity)  # what the client's misbehaviour monitor did (none: empty)
 
+    @property
+    def recorded(self) -> int:
+        """Frames whose timings went into the ring (``frames`` may also count others)."""
+        return self._ring.recorded
+
     def record(self, timings: tuple[float, float, float, float, float]) -> None:
-        if self.recorded == len(self._ring) < self.capacity:  # grow until the ring is full size
-            self._ring = np.concatenate([self._ring, np.zeros_like(self._ring[: self.capacity - len(self._ring)])])
-        self._ring[self.recorded % len(self._ring)] = timings
-        self.recorded += 1
+        self._ring.add(timings)
         self.frames += 1
 
     def count_bad_input(self, kind: str) -> None:
@@ -75,11 +77,7 @@ class LatencyStats:
 
     def samples(self, since: int = 0) -> np.ndarray:
         """Timings of the retained frames numbered ``since`` and later, oldest first; shape (n, len(STAGES))."""
-        start = max(since, self.recorded - len(self._ring), 0)
-        if start >= self.recorded:
-            return self._ring[:0]
-        idx = np.arange(start, self.recorded) % len(self._ring)
-        return self._ring[idx]
+        return self._ring.samples(since)
 
     def summary(self) -> StatsSummary:
         return summarize([self])
@@ -89,8 +87,7 @@ class LatencyStats:
                      bad_input: dict[str, int] | None = None, bad_output: int = 0) -> LatencyStats:
         """Rebuild statistics from saved samples (how a worker process hands its statistics back)."""
         stats = cls(name, capacity=max(1, len(samples)))
-        stats._ring = np.asarray(samples, np.float32).reshape(-1, len(STAGES))
-        stats.recorded = len(stats._ring)
+        stats._ring = SampleRing.of(samples, len(STAGES))
         stats.frames, stats.manual, stats.malformed = frames, manual, malformed
         stats.bad_input, stats.bad_output = dict(bad_input or {}), bad_output
         return stats
