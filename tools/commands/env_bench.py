@@ -25,8 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", type=int, default=0, metavar="N",
                         help="also profile N steps on the first track (cProfile, by time of their own)")
     parser.add_argument("--vector", type=int, default=0, metavar="N",
-                        help="also time an AsyncVectorEnv of N envs against one env on the first track: scaling, "
-                             "CPU ms per step of each process, workers' peak and shared memory (Linux)")
+                        help="also time an AsyncVectorEnv of N envs against one env on the first track, its workers "
+                             "free and then pinned to a core each: scaling, CPU ms per step of each process, "
+                             "workers' peak and shared memory (Linux)")
 
 
 def run(args: argparse.Namespace) -> int:
