@@ -38,7 +38,6 @@ class MonitorTally:
     """One client's monitor figures; ``note`` adds a frame (a row assignment, like the stage timings)."""
 
     def __init__(self, capacity: int) -> None:
-        self.capacity = capacity
         self.states = dict.fromkeys(STATES, 0)
         self.episodes = dict.fromkeys(STATES[1:], 0)
         self.switched_off = 0
@@ -83,7 +82,7 @@ class MonitorTally:
     @classmethod
     def restore(cls, samples: np.ndarray, counters: dict[str, object] | None) -> MonitorTally:
         """The tally saved as ``samples`` and ``counters`` (a worker process's hand-back)."""
-        tally = cls(max(1, len(np.asarray(samples).reshape(-1, len(COLUMNS)))))
+        tally = cls(1)
         tally._ring = SampleRing.of(samples, len(COLUMNS))
         c = counters or {}
         for key, into in (("states", tally.states), ("episodes", tally.episodes)):

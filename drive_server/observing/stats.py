@@ -48,7 +48,6 @@ class LatencyStats:
         self.malformed = 0  # frames answered by the fallback policy because the INPUT was unusable
         self.bad_input: dict[str, int] = {}  # ``malformed`` by kind of bad input (image, number, payload, json)
         self.bad_output = 0  # frames answered by the fallback policy because the MODEL's output was not finite
-        self.capacity = capacity
         self._ring = SampleRing(len(STAGES), capacity, _INITIAL_ROWS)
         self.monitor = MonitorTally(capacity)  # what the client's misbehaviour monitor did (none: empty)
 
